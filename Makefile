@@ -1,0 +1,29 @@
+# Every target works on a fresh clone: it creates .venv and installs into it if needed.
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: setup test bench lint demo
+
+$(STAMP): pyproject.toml
+	python3 -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	# torch first, pinned: this spec resolves to the CPU wheel on these machines.
+	$(PY) -m pip install --quiet torch==2.13.0
+	$(PY) -m pip install --quiet -e ".[dev]"
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+bench: $(STAMP)
+	$(PY) bench/pgd_bench.py
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check ptwin tests bench train.py
+	$(VENV)/bin/ruff format --check ptwin tests bench train.py
+
+demo: $(STAMP)
+	$(PY) train.py

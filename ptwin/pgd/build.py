@@ -1,0 +1,68 @@
+"""Build a parametric PGD basis from a ``PGDConfig`` (offline, once)."""
+
+from __future__ import annotations
+
+import resource
+import time
+from collections.abc import Callable
+
+import torch
+
+from ptwin.pgd.basis import Basis
+from ptwin.pgd.compression import force_modes, recompress
+from ptwin.pgd.config import PGDConfig
+from ptwin.pgd.enrichment import enrich
+from ptwin.pgd.problem import build_problem
+
+
+def build_basis(config: PGDConfig, progress: Callable[[str], None] = print) -> Basis:
+    """Greedy PGD on the configured mesh (and, with ``richardson``, on the mesh with
+    half the rings), then Richardson-combine and recompress the force.
+
+    The pressure field stored is the fine mesh's; the force is the extrapolated one.
+    """
+    start = time.perf_counter()
+    levels = [config.plane.rings] + ([config.plane.rings // 2] if config.richardson else [])
+    weights = [1.0] if not config.richardson else _richardson_weights(config.richardson_order)
+    betas, parameters, fine = [], [], None
+    for rings, weight in zip(levels, weights):
+        problem = build_problem(config, rings=rings)
+        progress(
+            f"PGD [{config.coordinates} coordinates] on {problem.dims[0].size} in-plane x "
+            f"{problem.dims[1].size} thickness nodes ({rings} rings)"
+        )
+        solution = enrich(problem.dims, problem.n_terms, config.enrichment, progress, _force_at_probes(problem))
+        beta, factors = force_modes(solution, problem.top_integral, problem.dims[4].nodes)
+        betas.append(weight * beta)
+        parameters.append(factors)
+        fine = fine or (problem, solution)
+    names = [dim.name for dim in fine[0].dims[2:]]
+    joined = [torch.cat([p[d] for p in parameters], dim=1) for d in range(len(names))]
+    force = recompress(names, torch.cat(betas), joined)
+    stats = {
+        "modes_per_mesh": [beta.numel() for beta in betas],
+        "seconds": time.perf_counter() - start,
+        "peak_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+        "force_ranks": [f.shape[1] for f in force.functions],
+    }
+    return Basis.from_build(config, fine[0], fine[1], force, stats)
+
+
+def _force_at_probes(problem, count: int = 64, seed: int = 0):
+    """The force at fixed random grid points of the parameter box: the output whose
+    change per mode is the stopping residual."""
+    generator = torch.Generator().manual_seed(seed)
+    index = [torch.randint(dim.size, (count,), generator=generator) for dim in problem.dims[2:]]
+
+    def output(factors, amplitudes):
+        plane, thickness, *parameters = factors
+        beta = amplitudes * (problem.top_integral @ plane) * thickness[-1]
+        return (beta * torch.stack([p[i] for p, i in zip(parameters, index)]).prod(dim=0)).sum(dim=1)
+
+    return output
+
+
+def _richardson_weights(order: float) -> list[float]:
+    """F = (2^p F_h − F_2h)/(2^p − 1): weights of the fine and the coarse force."""
+    ratio = 2.0**order
+    return [ratio / (ratio - 1), -1 / (ratio - 1)]

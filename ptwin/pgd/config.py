@@ -1,0 +1,85 @@
+"""Typed settings of a PGD basis build; their hash keys the on-disk cache."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass, field
+
+from ptwin.pgd.enrichment import EnrichmentSettings
+
+
+@dataclass
+class Grid:
+    """A log-uniform grid of one parameter [SI units]."""
+
+    minimum: float
+    maximum: float
+    nodes: int
+
+
+@dataclass
+class PlaneMesh:
+    """The in-plane unit-disc mesh (see ``ptwin.pgd.mesh.unit_disc``)."""
+
+    rings: int = 16
+    ring_density: float = 6.58
+    edge_grading: float = 1.0
+
+
+@dataclass
+class ThicknessMesh:
+    """The φ mesh, graded toward the loaded top; ``finest`` is the top element."""
+
+    nodes: int = 300
+    finest: float = 1.0e-8
+
+
+@dataclass
+class PGDConfig:
+    """Everything that determines a basis. ``coordinates``: "scaled" (aspect ratio
+    H/R as the extra coordinate, converges) or "paper" (R and H separated, stalls).
+    ``richardson``: also build on the mesh with half the rings and extrapolate the
+    force with ``richardson_order`` (the ``precise`` preset)."""
+
+    coordinates: str = "scaled"
+    plane: PlaneMesh = field(default_factory=PlaneMesh)
+    thickness: ThicknessMesh = field(default_factory=ThicknessMesh)
+    velocity: Grid = field(default_factory=lambda: Grid(1.0e-8, 5.0e-4, 41))
+    permeability: Grid = field(default_factory=lambda: Grid(1.0e-19, 1.0e-13, 61))
+    contact_radius: Grid = field(default_factory=lambda: Grid(1.0e-7, 5.0e-5, 61))
+    height: Grid = field(default_factory=lambda: Grid(1.0e-6, 1.0e-2, 161))
+    aspect_ratio: Grid = field(default_factory=lambda: Grid(0.1, 1.0e5, 241))
+    enrichment: EnrichmentSettings = field(default_factory=EnrichmentSettings)
+    richardson: bool = False
+    richardson_order: float = 2.0
+
+    def __post_init__(self):
+        if self.coordinates not in ("scaled", "paper"):
+            raise ValueError(f"pgd.coordinates must be 'scaled' or 'paper', got {self.coordinates!r}")
+        for name in ("velocity", "permeability", "contact_radius", "height", "aspect_ratio"):
+            grid = getattr(self, name)
+            if not 0 < grid.minimum < grid.maximum or grid.nodes < 4:
+                raise ValueError(f"pgd.{name}: need 0 < minimum < maximum and nodes >= 4, got {grid}")
+
+    @classmethod
+    def from_dict(cls, values: dict) -> PGDConfig:
+        grids = {
+            k: Grid(**values[k])
+            for k in ("velocity", "permeability", "contact_radius", "height", "aspect_ratio")
+            if k in values
+        }
+        nested = {
+            "plane": PlaneMesh(**values.get("plane", {})),
+            "thickness": ThicknessMesh(**values.get("thickness", {})),
+            "enrichment": EnrichmentSettings(**values.get("enrichment", {})),
+        }
+        plain = {k: v for k, v in values.items() if k not in grids and k not in nested}
+        return cls(**plain, **grids, **nested)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def hash(self) -> str:
+        """sha256 of the canonical JSON of every setting (the cache key)."""
+        return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True).encode()).hexdigest()

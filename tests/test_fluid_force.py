@@ -1,0 +1,79 @@
+"""The FluidForce layer: derivatives, out-of-range policy, basis I/O."""
+
+import pytest
+import torch
+
+import ptwin
+from ptwin.pgd.basis import Basis, BasisError
+from ptwin.pgd.reference import force_coefficient
+
+
+def test_gradcheck_in_velocity_radius_height_and_permeability(basis_file):
+    layer = ptwin.FluidForce.load(basis_file, permeability=2e-16, viscosity=1e-3)
+    inputs = [
+        torch.tensor([1e-5, 4e-5], dtype=torch.float64, requires_grad=True),
+        torch.tensor([2e-6, 7e-6], dtype=torch.float64, requires_grad=True),
+        torch.tensor([6e-3, 3e-5], dtype=torch.float64, requires_grad=True),
+        torch.tensor(2e-16, dtype=torch.float64, requires_grad=True),
+    ]
+    # Scale to O(1) so finite differences resolve every input.
+    scales = [1e-5, 1e-6, 1e-5, 1e-16]
+
+    def scaled(u, r, h, k):
+        return layer.evaluate(u * scales[0], r * scales[1], h * scales[2], k * scales[3]) * 1e6
+
+    unit = [(t / s).detach().requires_grad_(True) for t, s in zip(inputs, scales)]
+    assert torch.autograd.gradcheck(scaled, unit)
+
+
+def test_derivative_in_permeability_is_minus_force_over_permeability(basis_file):
+    layer = ptwin.FluidForce.load(basis_file, permeability=3e-16, viscosity=1e-3)
+    velocity = torch.tensor([2e-6, 8e-5], dtype=torch.float64)
+    radius = torch.tensor([1e-6, 6e-6], dtype=torch.float64)
+    force = layer(velocity, radius, torch.full_like(radius, 6e-3))
+    (gradient,) = torch.autograd.grad(force.sum(), layer.log_permeability)
+    # d/dlogK = K d/dK = −F (F ∝ 1/K exactly).
+    assert gradient.item() == pytest.approx(-force.sum().item(), rel=1e-6)
+
+
+def test_first_contact_follows_the_small_radius_law(basis_file):
+    layer = ptwin.FluidForce.load(basis_file, permeability=2e-16, viscosity=1e-3)
+    radius = torch.tensor([0.0, 1e-9, 3e-8], dtype=torch.float64)
+    force = layer(torch.full_like(radius, 1e-5), radius, torch.full_like(radius, 6e-3))
+    closed = force_coefficient(1e4) * 1e-3 * 1e-5 * radius**3 / 2e-16
+    assert force[0] == 0
+    assert torch.allclose(force[1:], closed[1:], rtol=1e-2)
+
+
+def test_point_off_the_grid_is_refused_with_the_fix(basis_file):
+    layer = ptwin.FluidForce.load(basis_file)
+    with pytest.raises(ValueError, match="aspect_ratio .* below the basis grid .* pgd.aspect_ratio.minimum"):
+        layer(torch.tensor([1e-5]), torch.tensor([1e-5]), torch.tensor([1e-7]))
+
+
+def test_save_load_round_trip_is_bit_exact(small_basis, basis_file, tmp_path):
+    loaded = Basis.load(basis_file)
+    assert loaded.config_hash == small_basis.config_hash
+    for a, b in zip(loaded.force.functions, small_basis.force.functions):
+        assert torch.equal(a, b)
+    assert torch.equal(loaded.field["factors_aspect_ratio"], small_basis.field["factors_aspect_ratio"])
+
+
+def test_corrupted_truncated_and_foreign_files_are_refused(basis_file, tmp_path):
+    data = bytearray(basis_file.read_bytes())
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(bytes(data[: len(data) // 2]))
+    with pytest.raises(BasisError, match="truncated.pt: not a readable PGD basis"):
+        Basis.load(truncated)
+    flipped = tmp_path / "flipped.pt"
+    payload = torch.load(basis_file, weights_only=True)
+    payload["tensors"]["force_core"] = payload["tensors"]["force_core"] * (1 + 1e-12)
+    torch.save(payload, flipped)
+    with pytest.raises(BasisError, match="checksum mismatch"):
+        Basis.load(flipped)
+    payload = torch.load(basis_file, weights_only=True)
+    payload["format"] = "ptwin-pgd-basis/0"
+    foreign = tmp_path / "foreign.pt"
+    torch.save(payload, foreign)
+    with pytest.raises(BasisError, match="basis format 'ptwin-pgd-basis/0'"):
+        Basis.load(foreign)

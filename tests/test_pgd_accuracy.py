@@ -1,0 +1,90 @@
+"""The PGD basis against the closed form, the exact discrete model and the Bessel field."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg
+import torch
+
+from ptwin.pgd.config import PGDConfig
+from ptwin.pgd.problem import build_problem, log_grid
+from ptwin.pgd.reference import bessel_pressure, discrete_force_coefficient, force_coefficient
+from ptwin.pgd.verify import verify
+from tests.conftest import small_config
+
+
+def test_closed_form_limit_and_thin_film():
+    # c(∞) = 4π Σ 1/j_n³ ≈ 1.01639 (physics-terms.md); thin films: c(x) → π/(8x) + O(1).
+    assert force_coefficient(1e4) == pytest.approx(1.01639, abs=1e-5)
+    x = 1e-3
+    assert force_coefficient(x) * x == pytest.approx(np.pi / 8, rel=1e-2)
+
+
+def test_fast_diagonalisation_equals_sparse_direct_solve():
+    config = small_config()
+    config.plane.rings, config.thickness.nodes = 3, 30
+    problem = build_problem(config)
+    plane, thickness = problem.dims[:2]
+    x = 2.5
+    matrix = x * sp.kron(plane.stiffness, thickness.mass) + sp.kron(plane.mass, thickness.stiffness) / x
+    top = np.zeros(thickness.size)
+    top[-1] = 1
+    load = np.kron(problem.top_integral.numpy(), top)
+    direct = load @ scipy.sparse.linalg.spsolve(matrix.tocsc(), load)
+    # Roundoff at the condition number of a φ mesh whose elements span 1e-7 … 0.5.
+    assert discrete_force_coefficient(problem, [x])[0] == pytest.approx(direct, rel=1e-8)
+
+
+def test_small_basis_against_discrete_model_and_closed_form(small_basis):
+    report = verify(small_basis, points=1000, discrete_points=4)
+    assert report["discrete"] < 1e-3  # the PGD's own error
+    # The 6-ring disc extrapolated against 3 rings: its discretisation error is ~1.6e-2.
+    assert report["closed_form"] < 2e-2
+
+
+def test_pressure_field_against_bessel_series(small_basis):
+    field, config = small_basis.field, small_basis.config
+    grids = [log_grid(getattr(config, name)) for name in ("velocity", "permeability", "contact_radius", "aspect_ratio")]
+    picks = [10, 10, 10, 70]  # U, K, R, x at grid nodes (x ≈ 72)
+    values = [g[i].item() for g, i in zip(grids, picks)]
+    weights = field["amplitudes"].clone()
+    for name, i in zip(("velocity", "permeability", "contact_radius", "aspect_ratio"), picks):
+        weights = weights * field[f"factors_{name}"][i]
+    pgd = (field["factors_plane"] * weights) @ field["factors_thickness"].T  # (plane, thickness)
+    velocity, permeability, radius, x = values
+    r = field["plane_nodes"].norm(dim=1).numpy()[:, None]
+    phi = field["thickness_nodes"].numpy()[None, :]
+    away = (r < 0.8) & (phi < 1 - 0.2 / x) & (phi > 1 - 3 / x)  # below the top edge, where P is not negligible
+    exact = bessel_pressure(
+        r * radius,
+        phi * x * radius,
+        velocity=velocity,
+        permeability=permeability,
+        contact_radius=radius,
+        height=x * radius,
+    )
+    difference = (pgd.numpy() - exact)[away]
+    assert np.linalg.norm(difference) / np.linalg.norm(exact[away]) < 1e-2
+
+
+def test_velocity_and_permeability_modes_are_exact_power_laws(small_basis):
+    field, config = small_basis.field, small_basis.config
+    for name, exponent in (("velocity", 1.0), ("permeability", -1.0), ("contact_radius", 1.0)):
+        law = log_grid(getattr(config, name)) ** exponent
+        law = law / law.norm()
+        factors = field[f"factors_{name}"]
+        ratio = factors / (law[:, None] * torch.sign(factors[0]))
+        assert (ratio - 1).abs().max() < 1e-8, name
+
+
+@pytest.mark.slow
+def test_default_preset_meets_its_tolerances():
+    import yaml
+
+    from ptwin.pgd.build import build_basis
+
+    values = yaml.safe_load(open("configs/pgd/default.yaml"))
+    values.pop("defaults")
+    report = verify(build_basis(PGDConfig.from_dict(values), progress=lambda line: None))
+    assert report["closed_form"] <= 1e-3
+    assert report["discrete"] <= 1e-4

@@ -1,0 +1,38 @@
+"""Observed orders of the two FE discretisations (slope of log error vs log h)."""
+
+import numpy as np
+
+from ptwin.pgd.problem import build_problem
+from ptwin.pgd.reference import discrete_force_coefficient, force_coefficient
+from tests.conftest import small_config
+
+
+def observed_order(sizes, errors):
+    return np.polyfit(np.log(sizes), np.log(np.abs(errors)), 1)[0]
+
+
+def test_in_plane_order_is_two_on_edge_graded_discs():
+    x = np.array([1.0, 50.0])
+    rings = [4, 8, 16]
+    errors = []
+    for n in rings:
+        config = small_config()
+        config.plane.rings, config.thickness.nodes = n, 400
+        errors.append(discrete_force_coefficient(build_problem(config), x) / force_coefficient(x) - 1)
+    for column in range(len(x)):
+        order = observed_order(1.0 / np.array(rings), [e[column] for e in errors])
+        assert abs(order - 2.0) < 0.15, order
+
+
+def test_thickness_order_is_two_on_the_graded_mesh():
+    x = np.array([1.0])
+    config = small_config()
+    config.plane.rings = 4
+    config.thickness.nodes = 6400
+    reference = discrete_force_coefficient(build_problem(config), x)
+    counts = [50, 100, 200]
+    errors = []
+    for n in counts:
+        config.thickness.nodes = n
+        errors.append((discrete_force_coefficient(build_problem(config), x) / reference - 1)[0])
+    assert abs(observed_order(1.0 / np.array(counts), errors) - 2.0) < 0.2
