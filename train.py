@@ -46,9 +46,11 @@ def train(cfg: DictConfig, output_dir: Path) -> dict:
     }
     output_dir.mkdir(parents=True, exist_ok=True)
     (output_dir / "summary.json").write_text(json.dumps(summary, indent=2))
-    print(f"PGD basis {path.name}: {sum(summary['modes_per_mesh'])} modes, "
-          f"max force error {report['closed_form']:.1e} vs closed form, "
-          f"{report['discrete']:.1e} vs its discrete model")
+    print(
+        f"PGD basis {path.name}: {sum(summary['modes_per_mesh'])} modes, "
+        f"max force error {report['closed_form']:.1e} vs closed form, "
+        f"{report['discrete']:.1e} vs its discrete model"
+    )
     print(f"results in {output_dir}")
     return summary
 

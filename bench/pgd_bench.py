@@ -52,8 +52,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--presets", nargs="+", default=["default", "paper", "precise"])
     args = parser.parse_args()
-    print(f"{'preset':10s} {'coords':7s} {'modes':>10s} {'build s':>8s} {'peak GiB':>8s} "
-          f"{'vs closed':>10s} {'vs discrete':>11s} {'fwd /s':>9s} {'fwd+bwd /s':>10s} {'speed-up':>9s}")
+    print(
+        f"{'preset':10s} {'coords':7s} {'modes':>10s} {'build s':>8s} {'peak GiB':>8s} "
+        f"{'vs closed':>10s} {'vs discrete':>11s} {'fwd /s':>9s} {'fwd+bwd /s':>10s} {'speed-up':>9s}"
+    )
     for name in args.presets:
         for coordinates in ("scaled", "paper"):
             values = preset(name)
@@ -68,9 +70,12 @@ def main() -> None:
             discrete_force_coefficient(problem, [1.0e3])
             direct = time.perf_counter() - start
             stats = basis.stats
-            print(f"{name:10s} {coordinates:7s} {str(stats['modes_per_mesh']):>10s} {stats['seconds']:8.1f} "
-                  f"{stats['peak_rss_bytes'] / 2**30:8.2f} {report['closed_form']:10.1e} {report['discrete']:11.1e} "
-                  f"{forward:9.2e} {backward:10.2e} {forward * direct:9.1e}", flush=True)
+            print(
+                f"{name:10s} {coordinates:7s} {str(stats['modes_per_mesh']):>10s} {stats['seconds']:8.1f} "
+                f"{stats['peak_rss_bytes'] / 2**30:8.2f} {report['closed_form']:10.1e} {report['discrete']:11.1e} "
+                f"{forward:9.2e} {backward:10.2e} {forward * direct:9.1e}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

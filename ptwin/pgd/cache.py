@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
-from ptwin.pgd.basis import Basis
 from ptwin.pgd.build import build_basis
 from ptwin.pgd.config import PGDConfig
 

@@ -1,0 +1,213 @@
+"""Recording sets (contract: shared/recording-format.md): read, validate, write.
+
+Every refusal is one ``RecordingError`` line naming the file, the row (1-based line of
+the file) or the curve, and the fix. Nothing is dropped: extra columns are kept, and
+pre-contact samples, baseline offsets and unequal final depths are evidence, not errors.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+
+FORMAT = "ptwin-recordings/1"
+COLUMNS = ("curve", "base_speed", "time", "z", "force")
+MIN_SAMPLES = 20
+# Magnitudes no AFM indentation reaches in SI: a value past them is in other units.
+_PLAUSIBLE = {"z": (1e-3, "m (micrometres?)"), "force": (1e-3, "N (nanonewtons?)"), "base_speed": (1e-2, "m/s (µm/s?)")}
+
+
+class RecordingError(ValueError):
+    """Bad input in a recording set; the message is the one line to show the user."""
+
+
+@dataclass
+class Meta:
+    """The sample, probe and cantilever of a recording set (SI units)."""
+
+    probe_radius: float  # ρ [m]
+    spring_constant: float  # k_s [N/m]
+    sample_thickness: float  # H0 [m]
+    fluid_viscosity: float  # μ [Pa s]
+    reference_curve: str
+    sample: str = ""
+    contact_point: str = "known"
+    noise_std: float | None = None  # [N]
+    notes: str = ""
+
+
+@dataclass
+class RecordingSet:
+    """One sample at several base speeds: ``meta`` and the long table ``curves``."""
+
+    path: Path
+    meta: Meta
+    curves: pd.DataFrame
+
+    @property
+    def curve_ids(self) -> list[str]:
+        return list(dict.fromkeys(self.curves["curve"]))
+
+    def curve(self, curve_id: str) -> pd.DataFrame:
+        return self.curves[self.curves["curve"] == curve_id]
+
+
+def load_recordings(path: str | Path) -> RecordingSet:
+    """Read and validate the recording set in folder ``path``."""
+    folder = Path(path)
+    if not folder.is_dir():
+        raise RecordingError(
+            f"{folder}: no such recording-set folder; give data.path=<folder with meta.yaml and curves.csv>"
+        )
+    meta = _read_meta(folder / "meta.yaml")
+    curves = _read_curves(folder / "curves.csv", meta)
+    return RecordingSet(folder, meta, curves)
+
+
+def write_recordings(path: str | Path, meta: Meta, curves: pd.DataFrame) -> None:
+    """Write ``meta.yaml`` and ``curves.csv`` (full float precision) into folder ``path``."""
+    folder = Path(path)
+    folder.mkdir(parents=True, exist_ok=True)
+    values = {"format": FORMAT, **{k: v for k, v in asdict(meta).items() if v not in (None, "")}}
+    (folder / "meta.yaml").write_text(yaml.safe_dump(values, sort_keys=False))
+    curves.to_csv(folder / "curves.csv", index=False, float_format="%.17g")
+
+
+def _read_meta(file: Path) -> Meta:
+    if not file.is_file():
+        raise RecordingError(f"{file}: missing; a recording set needs meta.yaml beside curves.csv")
+    try:
+        values = yaml.safe_load(file.read_text())
+    except yaml.YAMLError as error:
+        raise RecordingError(f"{file}: not valid YAML ({str(error).splitlines()[0]}); fix the syntax") from None
+    if not isinstance(values, dict):
+        raise RecordingError(f"{file}: expected key: value lines (probe_radius, spring_constant, ...)")
+    if values.get("format", FORMAT) != FORMAT:
+        raise RecordingError(f"{file}: format {values['format']!r}, this ptwin reads {FORMAT!r}")
+    numbers = {}
+    for key in ("probe_radius", "spring_constant", "sample_thickness", "fluid_viscosity"):
+        if key not in values:
+            raise RecordingError(f"{file}: missing key {key!r}; add it in SI units")
+        numbers[key] = _positive_number(file, key, values[key])
+    if numbers["probe_radius"] > 1e-3:
+        raise RecordingError(
+            f"{file}: probe_radius {numbers['probe_radius']:g} m is not SI (micrometres?); write e.g. 12.0e-6"
+        )
+    if numbers["sample_thickness"] > 1.0:
+        raise RecordingError(
+            f"{file}: sample_thickness {numbers['sample_thickness']:g} m is not SI; write metres, e.g. 6.0e-3"
+        )
+    if "reference_curve" not in values:
+        raise RecordingError(f"{file}: missing key 'reference_curve'; name the slowest curve, e.g. v0.5")
+    contact = values.get("contact_point", "known")
+    if contact not in ("known", "estimate"):
+        raise RecordingError(f"{file}: contact_point {contact!r}; use known or estimate")
+    noise = values.get("noise_std")
+    return Meta(
+        **numbers,
+        reference_curve=str(values["reference_curve"]),
+        sample=str(values.get("sample", "")),
+        contact_point=contact,
+        noise_std=None if noise is None else _positive_number(file, "noise_std", noise),
+        notes=str(values.get("notes", "")),
+    )
+
+
+def _positive_number(file: Path, key: str, value) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise RecordingError(f"{file}: {key} {value!r} is not a number; write it in SI units, e.g. 1.0e-3") from None
+    if not math.isfinite(number) or number <= 0:
+        raise RecordingError(f"{file}: {key} must be a positive finite number, got {value!r}")
+    return number
+
+
+def _read_curves(file: Path, meta: Meta) -> pd.DataFrame:
+    if not file.is_file():
+        raise RecordingError(f"{file}: missing; a recording set needs curves.csv beside meta.yaml")
+    try:
+        frame = pd.read_csv(file, dtype=str, keep_default_na=False)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
+        raise RecordingError(
+            f"{file}: not a readable CSV ({str(error).splitlines()[0]}); one header line, comma separated"
+        ) from None
+    missing = [c for c in COLUMNS if c not in frame.columns]
+    if missing:
+        raise RecordingError(
+            f"{file}: missing column(s) {', '.join(missing)}; the header must hold {', '.join(COLUMNS)}"
+        )
+    if frame.empty:
+        raise RecordingError(f"{file}: no samples below the header")
+    frame["curve"] = frame["curve"].str.strip()
+    for column in COLUMNS[1:]:
+        values = pd.to_numeric(frame[column].str.strip(), errors="coerce")
+        bad = ~np.isfinite(values.to_numpy(dtype=float))
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise RecordingError(
+                f"{file}: row {row + 2}, column {column}: {frame[column].iloc[row]!r} is not a finite number; "
+                "fix or remove the row"
+            )
+        frame[column] = values.astype(np.float64)
+        limit, unit = _PLAUSIBLE.get(column, (None, None))
+        if limit is not None and frame[column].abs().max() > limit:
+            row = int(frame[column].abs().to_numpy().argmax())
+            raise RecordingError(
+                f"{file}: row {row + 2}, column {column}: {frame[column].iloc[row]:g} is not SI {unit}; convert to SI"
+            )
+    _check_curves(file, frame, meta)
+    return frame
+
+
+def _check_curves(file: Path, frame: pd.DataFrame, meta: Meta) -> None:
+    ids = frame["curve"].to_numpy()
+    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
+    first_seen = {}
+    for start in starts:
+        curve = ids[start]
+        if curve == "":
+            raise RecordingError(f"{file}: row {start + 2}: empty curve id; give every row its curve id")
+        if curve in first_seen:
+            raise RecordingError(
+                f"{file}: row {start + 2}: curve {curve!r} resumes after another curve; keep each curve's rows together"
+            )
+        first_seen[curve] = start
+    seen = set(first_seen)
+    for start, stop in zip(starts, np.r_[starts[1:], len(frame)]):
+        curve = ids[start]
+        rows = frame.iloc[start:stop]
+        if len(rows) < MIN_SAMPLES:
+            raise RecordingError(f"{file}: curve {curve!r} has {len(rows)} samples, at least {MIN_SAMPLES} are needed")
+        step = np.diff(rows["time"].to_numpy())
+        if (step <= 0).any():
+            row = start + int(np.argmax(step <= 0)) + 1
+            raise RecordingError(
+                f"{file}: row {row + 2}, curve {curve!r}: time does not increase; sort the curve by time or fix the row"
+            )
+        speeds = rows["base_speed"].to_numpy()
+        if not np.allclose(speeds, speeds[0], rtol=1e-9, atol=0):
+            raise RecordingError(
+                f"{file}: curve {curve!r}: base_speed changes within the curve; one nominal speed per curve"
+            )
+        if speeds[0] <= 0:
+            raise RecordingError(
+                f"{file}: curve {curve!r}: base_speed {speeds[0]:g} must be > 0 (approach, into the sample)"
+            )
+        depth = rows["z"].to_numpy() - rows["force"].to_numpy() / meta.spring_constant
+        if depth.max() > meta.probe_radius:
+            row = start + int(depth.argmax())
+            raise RecordingError(
+                f"{file}: row {row + 2}, curve {curve!r}: depth {depth.max():.3g} m exceeds the probe radius "
+                f"{meta.probe_radius:.3g} m; check z, force and the spring constant in meta.yaml"
+            )
+    if meta.reference_curve not in seen:
+        raise RecordingError(
+            f"{file.parent / 'meta.yaml'}: reference_curve {meta.reference_curve!r} is not a curve of curves.csv "
+            f"(curves: {', '.join(sorted(seen))})"
+        )

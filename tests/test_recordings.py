@@ -1,0 +1,130 @@
+"""The recording-set loader: good sets load whole, bad ones get one located line."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from ptwin.data.recordings import Meta, RecordingError, load_recordings, write_recordings
+
+META = Meta(
+    probe_radius=12e-6, spring_constant=2.88, sample_thickness=6e-3, fluid_viscosity=1e-3, reference_curve="v0.5"
+)
+
+
+def good_curves(samples=40):
+    frames = []
+    for name, speed in (("v0.5", 0.5e-6), ("v8", 8e-6)):
+        time = np.linspace(0.0, 2e-6 / speed, samples)
+        z = -0.2e-6 + speed * time
+        force = 1e-2 * np.clip(z, 0.0, None) ** 1.5 / 1e-3 + 1e-10
+        frames.append(pd.DataFrame({"curve": name, "base_speed": speed, "time": time, "z": z, "force": force}))
+    return pd.concat(frames, ignore_index=True)
+
+
+def test_round_trip_keeps_every_value(tmp_path):
+    curves = good_curves()
+    write_recordings(tmp_path, META, curves)
+    loaded = load_recordings(tmp_path)
+    assert loaded.meta == META
+    assert loaded.curve_ids == ["v0.5", "v8"]
+    pd.testing.assert_frame_equal(loaded.curves, curves)
+    assert loaded.curves["z"].dtype == np.float64
+
+
+def write_raw(tmp_path, curves: pd.DataFrame, meta_text: str | None = None):
+    write_recordings(tmp_path, META, curves)
+    if meta_text is not None:
+        (tmp_path / "meta.yaml").write_text(meta_text)
+
+
+@pytest.mark.parametrize(
+    ("mangle", "message"),
+    [
+        (lambda c: c.drop(columns="force"), r"curves.csv: missing column\(s\) force"),
+        (lambda c: c.assign(force=c["force"].astype(object).where(c.index != 5, "abc")), r"row 7, column force: 'abc'"),
+        (lambda c: c.assign(z=c["z"].where(c.index != 3, np.nan)), r"row 5, column z: .* not a finite number"),
+        (lambda c: c.assign(z=c["z"] * 1e6), r"column z: .* not SI m \(micrometres\?\)"),
+        (lambda c: c.iloc[::-1].reset_index(drop=True), r"time does not increase"),
+        (lambda c: c.iloc[:50], r"curve 'v8' has 10 samples, at least 20"),
+        (lambda c: pd.concat([c.iloc[:10], c.iloc[40:], c.iloc[10:40]]), r"curve 'v0.5' resumes after another curve"),
+        (lambda c: c.assign(force=c["force"] - 1e-4), r"depth .* exceeds the probe radius"),
+    ],
+)
+def test_bad_curves_get_one_located_line(tmp_path, mangle, message):
+    write_raw(tmp_path, mangle(good_curves()))
+    with pytest.raises(RecordingError, match=message) as error:
+        load_recordings(tmp_path)
+    assert "\n" not in str(error.value)
+
+
+def meta_text(**changes) -> str:
+    values = {
+        "probe_radius": "12.0e-6",
+        "spring_constant": "2.88",
+        "sample_thickness": "6.0e-3",
+        "fluid_viscosity": "1.0e-3",
+        "reference_curve": "v0.5",
+        **changes,
+    }
+    return "".join(f"{key}: {value}\n" for key, value in values.items() if value is not None)
+
+
+@pytest.mark.parametrize(
+    ("meta_text", "message"),
+    [
+        (meta_text(probe_radius="12"), r"meta.yaml: probe_radius 12 m is not SI"),
+        (meta_text(spring_constant="0"), r"meta.yaml: spring_constant must be a positive"),
+        (meta_text(reference_curve="v1"), r"meta.yaml: reference_curve 'v1' is not a curve"),
+        (meta_text(sample_thickness=None), r"meta.yaml: missing key 'sample_thickness'"),
+        (meta_text(fluid_viscosity="water"), r"meta.yaml: fluid_viscosity 'water' is not a number"),
+    ],
+)
+def test_bad_meta_gets_one_located_line(tmp_path, meta_text, message):
+    write_raw(tmp_path, good_curves(), meta_text)
+    with pytest.raises(RecordingError, match=message):
+        load_recordings(tmp_path)
+
+
+def test_missing_files_are_named(tmp_path):
+    with pytest.raises(RecordingError, match="no such recording-set folder"):
+        load_recordings(tmp_path / "nowhere")
+    write_recordings(tmp_path, META, good_curves())
+    (tmp_path / "curves.csv").unlink()
+    with pytest.raises(RecordingError, match="curves.csv: missing"):
+        load_recordings(tmp_path)
+
+
+cells = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=6),
+    st.just(""),
+    st.integers(-10, 10),
+)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    data=st.data(),
+    drop=st.lists(st.sampled_from(["curve", "base_speed", "time", "z", "force"]), max_size=2, unique=True),
+    shuffle=st.booleans(),
+)
+def test_mangled_files_load_whole_or_fail_with_a_recording_error(tmp_path, data, drop, shuffle):
+    curves = good_curves().astype(object)
+    for _ in range(data.draw(st.integers(0, 3))):
+        row = data.draw(st.integers(0, len(curves) - 1))
+        column = data.draw(st.sampled_from(list(curves.columns)))
+        curves.loc[row, column] = data.draw(cells)
+    curves = curves.drop(columns=drop)
+    if shuffle:
+        curves = curves[list(reversed(curves.columns))]
+    write_raw(tmp_path, curves)
+    try:
+        loaded = load_recordings(tmp_path)
+    except RecordingError as error:
+        assert "\n" not in str(error) and ("curves.csv" in str(error) or "meta.yaml" in str(error))
+        return
+    # Loaded: nothing dropped, every number finite.
+    assert len(loaded.curves) == len(curves)
+    assert np.isfinite(loaded.curves[["base_speed", "time", "z", "force"]].to_numpy()).all()
