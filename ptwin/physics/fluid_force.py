@@ -63,24 +63,30 @@ class FluidForce(nn.Module):
         return self.evaluate(velocity, contact_radius, height, self.permeability)
 
     def evaluate(self, velocity, contact_radius, height, permeability) -> torch.Tensor:
-        """The force for an explicit permeability (any shape broadcastable to the batch)."""
+        """The force for an explicit permeability [m²]: a scalar, or one per point of the batch."""
         shape = torch.broadcast_shapes(velocity.shape, contact_radius.shape, height.shape)
         u, r, h = (t.expand(shape).reshape(-1) for t in (velocity, contact_radius, height))
-        k = permeability.expand(shape).reshape(-1)
         smallest = self.functions[2].minimum
-        below = r < smallest
-        safe_r = torch.where(r > 0, r, torch.full_like(r, smallest))
-        scale = torch.where(below, (r / smallest) ** 3, torch.ones_like(r))
-        r_eval = torch.where(below, torch.full_like(r, smallest), r)
-        h_eval = torch.where(below, h * smallest / safe_r, h)
-        last = h_eval / r_eval if self.coordinates == "scaled" else h_eval
+        scale = 1.0
+        if bool((r < smallest).any()):
+            below = r < smallest
+            safe_r = torch.where(r > 0, r, torch.full_like(r, smallest))
+            scale = torch.where(below, (r / smallest) ** 3, torch.ones_like(r))
+            h = torch.where(below, h * smallest / safe_r, h)
+            r = torch.where(below, torch.full_like(r, smallest), r)
+        last = h / r if self.coordinates == "scaled" else h
         last = self._in_range(self.names[3], last, clamp_above=self.names[3] == "aspect_ratio")
-        arguments = [u, k, self._in_range("contact_radius", r_eval), last]
-        factors = [f(a) for f, a in zip(self.functions, arguments)]
+        factors = [
+            self.functions[0](u),
+            self.functions[1](permeability.reshape(-1)),  # one K for the batch (or one per point)
+            self.functions[2](self._in_range("contact_radius", r)),
+            self.functions[3](last),
+        ]
         if self.core.numel() == 1:
             value = self.core.reshape(()) * factors[0][:, 0] * factors[1][:, 0] * factors[2][:, 0] * factors[3][:, 0]
         else:
-            value = torch.einsum("abcd,na,nb,nc,nd->n", self.core, *factors)
+            batch = [f.expand(u.numel(), -1) for f in factors]
+            value = torch.einsum("abcd,na,nb,nc,nd->n", self.core, *batch)
         return (self.viscosity * scale * value).reshape(shape)
 
     def _in_range(self, name: str, values: torch.Tensor, clamp_above: bool = False) -> torch.Tensor:

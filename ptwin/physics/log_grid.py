@@ -37,31 +37,37 @@ class LogGridFunctions(nn.Module):
         self.power_law = None
         if samples.shape[1] == 1 and np.all(samples != 0) and len(np.unique(np.sign(samples))) == 1:
             exponent, log_prefactor = np.polyfit(np.log(nodes), np.log(np.abs(samples[:, 0])), 1)
-            fitted = np.exp(log_prefactor) * nodes**exponent
-            if np.max(np.abs(fitted / np.abs(samples[:, 0]) - 1)) < POWER_LAW_TOL:
-                self.power_law = (float(np.sign(samples[0, 0]) * np.exp(log_prefactor)), float(exponent))
+            # An integer exponent that fits as well is the physics (U¹, K⁻¹, R³) and is cheaper.
+            for candidate in (round(exponent), exponent):
+                prefactor = np.exp(np.mean(np.log(np.abs(samples[:, 0])) - candidate * np.log(nodes)))
+                fitted = prefactor * nodes**candidate
+                if np.max(np.abs(fitted / np.abs(samples[:, 0]) - 1)) < POWER_LAW_TOL:
+                    self.power_law = (float(np.sign(samples[0, 0]) * prefactor), candidate)
+                    break
         signs = np.sign(samples)
         self.logarithmic = bool(np.all(signs != 0) and np.all(signs == signs[:1]))
         table = np.log(np.abs(samples)) if self.logarithmic else samples
-        slopes = scipy.interpolate.CubicSpline(np.log(nodes), table, axis=0).derivative()(np.log(nodes))
-        self.register_buffer("table", torch.from_numpy(table))
-        self.register_buffer("slopes", torch.from_numpy(slopes * self.step))
+        slopes = scipy.interpolate.CubicSpline(np.log(nodes), table, axis=0).derivative()(np.log(nodes)) * self.step
+        # Cubic Hermite on each interval as a Horner polynomial in t ∈ [0, 1]: one gather per point.
+        y0, y1, d0, d1 = table[:-1], table[1:], slopes[:-1], slopes[1:]
+        cubic = np.stack([2 * y0 - 2 * y1 + d0 + d1, -3 * y0 + 3 * y1 - 2 * d0 - d1, d0, y0], axis=-1)
+        self.register_buffer("cubic", torch.from_numpy(cubic))  # (N-1, r, 4)
         self.register_buffer("signs", torch.from_numpy(signs[0].copy()))
 
     @property
     def rank(self) -> int:
-        return self.table.shape[1]
+        return self.cubic.shape[1]
 
     def forward(self, p: torch.Tensor) -> torch.Tensor:
         """(B,) parameter values -> (B, r) function values. Range checks are the caller's."""
         if self.power_law is not None:
             prefactor, exponent = self.power_law
+            if isinstance(exponent, int):
+                return (prefactor * p**exponent)[:, None]
             return (prefactor * torch.sign(p) * p.abs() ** exponent)[:, None]
         u = (torch.log(p) - math.log(self.minimum)) / self.step
-        index = u.detach().floor().clamp(0, self.table.shape[0] - 2).long()
+        index = u.detach().floor().clamp(0, self.cubic.shape[0] - 1).long()
         t = (u - index)[:, None]
-        y0, y1 = self.table[index], self.table[index + 1]
-        d0, d1 = self.slopes[index], self.slopes[index + 1]
-        t2, t3 = t * t, t * t * t
-        value = (2 * t3 - 3 * t2 + 1) * y0 + (t3 - 2 * t2 + t) * d0 + (-2 * t3 + 3 * t2) * y1 + (t3 - t2) * d1
+        a, b, c, d = self.cubic[index].unbind(-1)
+        value = ((a * t + b) * t + c) * t + d
         return self.signs * torch.exp(value) if self.logarithmic else value
