@@ -1,0 +1,72 @@
+"""The forward simulator against known truth."""
+
+import numpy as np
+import pytest
+
+from ptwin.data.recordings import load_recordings, write_recordings
+from ptwin.data.simulator import Experiment, simulate, simulate_curve
+from ptwin.pgd.reference import force_coefficient
+from ptwin.physics.elastic import hertz_force
+from ptwin.physics.kinematics import contact_radius, smoothed_derivative
+
+# scipy's numerical Jacobian overflows harmlessly on the stiff contact transient.
+pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+
+
+def fast(**changes):
+    return Experiment(samples=400, base_speeds=(0.5e-6, 8e-6, 40e-6), **changes)
+
+
+@pytest.mark.parametrize("speed", [8e-6, 40e-6])
+def test_clean_data_give_back_the_permeability(speed):
+    e = fast()
+    time, z, force, _ = simulate_curve(e, speed)
+    depth = z - force / e.spring_constant
+    radius = contact_radius(depth, e.probe_radius)
+    velocity = smoothed_derivative(time, depth, 21)
+    deep = (depth > 0.5e-6) & (time < time[-12])  # the last half-window has a one-sided derivative
+    fluid = force - hertz_force(depth, e.effective_modulus, e.probe_radius)
+    c = force_coefficient((e.sample_thickness - depth[deep]) / radius[deep])
+    apparent = c * e.fluid_viscosity * velocity[deep] * radius[deep] ** 3 / fluid[deep]
+    assert np.abs(apparent / e.permeability - 1).max() < 0.01
+
+
+def test_results_do_not_change_when_tolerances_tighten():
+    _, _, loose, _ = simulate_curve(fast(rtol=1e-8), 40e-6)
+    _, _, tight, _ = simulate_curve(fast(rtol=1e-11), 40e-6)
+    assert np.abs(loose - tight).max() < 1e-5 * np.abs(tight).max()
+
+
+def test_pore_relaxation_lowers_the_fast_force_only():
+    base = {v: simulate_curve(fast(), v)[2] for v in (0.5e-6, 40e-6)}
+    lag = {v: simulate_curve(fast(effects={"pore_pressure_relaxation": {"M": 3e4}}), v)[2] for v in (0.5e-6, 40e-6)}
+    assert lag[40e-6][-1] < base[40e-6][-1] * 0.99  # 1% of ~0.8 µN: ~30x the demo noise
+    assert lag[0.5e-6][-1] == pytest.approx(base[0.5e-6][-1], rel=1e-3)
+
+
+def test_strain_dependent_permeability_raises_the_force_with_depth():
+    _, _, base, depth = simulate_curve(fast(), 40e-6)
+    _, _, stiffer, _ = simulate_curve(fast(effects={"strain_dependent_permeability": {"m": 5.0}}), 40e-6)
+    gain = stiffer - base
+    assert gain[-1] > 0 and gain[-1] > gain[np.searchsorted(depth, 1e-6)] > 0
+
+
+def test_drag_and_offset_leave_their_evidence():
+    _, z, force, _ = simulate_curve(fast(effects={"cantilever_drag": {"b": 1e-4}}), 40e-6)
+    assert force[0] == pytest.approx(1e-4 * 40e-6)  # pre-contact offset grows with speed
+    _, z_off, _, _ = simulate_curve(fast(effects={"contact_offset": {"delta": 0.1e-6}}), 40e-6)
+    assert z_off[0] == pytest.approx(z[0] + 0.1e-6)
+
+
+def test_generated_sets_satisfy_the_recording_contract(tmp_path):
+    meta, curves = simulate(fast(noise_std=3e-10))
+    write_recordings(tmp_path, meta, curves)
+    loaded = load_recordings(tmp_path)
+    assert loaded.curve_ids == ["v0.5", "v8", "v40"] and loaded.meta.reference_curve == "v0.5"
+
+
+def test_unknown_terms_and_missing_parameters_are_refused():
+    with pytest.raises(ValueError, match="unknown term 'viscosity'"):
+        Experiment(effects={"viscosity": {"gamma": 1.0}})
+    with pytest.raises(ValueError, match="effects.solid_relaxation: missing parameter"):
+        Experiment(effects={"solid_relaxation": {"g": 0.2}})
