@@ -1,0 +1,72 @@
+"""The bundled demo and the synth command line."""
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+from ptwin.data.recordings import load_recordings
+from ptwin.physics.kinematics import curve_kinematics
+from ptwin.synth import main
+
+DEMO = Path(__file__).parent.parent / "data"
+pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+
+
+def test_demo_loads_and_its_noise_floor_is_the_truth():
+    truth = yaml.safe_load((DEMO / "demo.truth.yaml").read_text())
+    demo = load_recordings(DEMO / "demo")
+    assert demo.curve_ids == ["v0.5", "v2", "v8", "v40", "v80"]
+    assert list(truth["effects"]) == ["pore_pressure_relaxation"]
+    for curve in curve_kinematics(demo):
+        assert curve.noise_floor == pytest.approx(truth["noise_std"], rel=0.1), curve.curve
+
+
+@pytest.mark.slow
+def test_demo_is_what_its_documented_command_writes(tmp_path):
+    main(
+        [
+            "--out",
+            str(tmp_path / "demo"),
+            "--truth",
+            str(tmp_path / "truth.yaml"),
+            "--effect",
+            "pore_pressure_relaxation:M=3.0e4",
+        ]
+    )
+    pd.testing.assert_frame_equal(load_recordings(tmp_path / "demo").curves, load_recordings(DEMO / "demo").curves)
+
+
+def test_synth_writes_a_loadable_set_and_its_truth_outside(tmp_path):
+    main(
+        [
+            "--out",
+            str(tmp_path / "set"),
+            "--truth",
+            str(tmp_path / "truth.yaml"),
+            "--samples",
+            "200",
+            "--speeds",
+            "1e-6",
+            "2e-5",
+            "--effect",
+            "solid_viscosity:gamma=5.0",
+        ]
+    )
+    assert load_recordings(tmp_path / "set").curve_ids == ["v1", "v20"]
+    truth = yaml.safe_load((tmp_path / "truth.yaml").read_text())
+    assert truth["effects"] == {"solid_viscosity": {"gamma": 5.0}}
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["--effect", "viscosity:gamma=1"], "TERM:PARAM=VALUE"),
+        (["--effect", "solid_viscosity:gamma=abc"], "'abc' is not a number"),
+        (["--effect", "solid_relaxation:g=0.2"], "missing parameter"),
+    ],
+)
+def test_synth_refuses_bad_effects(tmp_path, arguments, message):
+    with pytest.raises(SystemExit, match=message):
+        main(["--out", str(tmp_path / "set"), "--truth", str(tmp_path / "truth.yaml"), *arguments])
