@@ -3,9 +3,9 @@
 - ``force_coefficient``: the closed form c(x) = 4π Σ_n coth(j_n x)/j_n³, so that the
   fluid force on a cylinder of radius R and height H = xR is c(x)·μ·U·R³/K.
 - ``bessel_pressure``: the pressure field as a Bessel series.
-- ``discrete_force_coefficient`` / ``discrete_pressure``: the exact solution of the
-  same discrete problem the PGD solves, by fast diagonalisation (a generalised
-  eigendecomposition of one FE dimension, banded or sparse solves in the other).
+- ``discrete_force_coefficient``: the force of the exact solution of the same
+  discrete problem the PGD solves, by fast diagonalisation (a generalised
+  eigendecomposition of the in-plane pencil, one tridiagonal solve per mode).
 """
 
 from __future__ import annotations
@@ -50,16 +50,6 @@ def _plane_modes(problem: DiscreteProblem):
 def _thickness_solve(problem, aspect_ratio, eigenvalue, rhs):
     thickness = problem.dims[1]
     return solve_tridiagonal(aspect_ratio * eigenvalue * thickness.mass + thickness.stiffness / aspect_ratio, rhs)
-
-
-def discrete_pressure(problem: DiscreteProblem, aspect_ratio: float) -> np.ndarray:
-    """p̂ on (free in-plane nodes × thickness nodes) for U = K = R = μ = 1."""
-    values, vectors = _plane_modes(problem)
-    load = vectors.T @ problem.top_integral.numpy()
-    top = np.zeros(len(problem.thickness_nodes))
-    top[-1] = 1.0
-    profiles = np.stack([_thickness_solve(problem, aspect_ratio, lam, b * top) for lam, b in zip(values, load)])
-    return vectors @ profiles
 
 
 def discrete_force_coefficient(problem: DiscreteProblem, aspect_ratios) -> np.ndarray:
