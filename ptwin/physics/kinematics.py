@@ -43,26 +43,33 @@ def contact_radius(depth: np.ndarray, probe_radius: float) -> np.ndarray:
     return np.sqrt(probe_radius**2 - (probe_radius - w) ** 2)
 
 
+def window_line(x: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray, at: np.ndarray):
+    """Least-squares lines through samples lo[i]..hi[i] (inclusive) of sorted x:
+    (value at ``at[i]``, slope) for every window i. O(N + windows), by cumulative sums."""
+    shifted = x - x[0]
+
+    def window_sum(values):
+        cumulative = np.concatenate([[0.0], np.cumsum(values)])
+        return cumulative[hi + 1] - cumulative[lo]
+
+    count = (hi - lo + 1).astype(float)
+    sx, sy, sxx, sxy = window_sum(shifted), window_sum(y), window_sum(shifted * shifted), window_sum(shifted * y)
+    slope = (sxy - sx * sy / count) / (sxx - sx * sx / count)
+    value = sy / count + slope * (at - x[0] - sx / count)
+    return value, slope
+
+
 def smoothed_derivative(time: np.ndarray, values: np.ndarray, window: int) -> np.ndarray:
     """Slope of a least-squares line over a centred window of ``window`` samples.
 
     Works on non-uniform time; the window shrinks (stays centred where possible) at
-    the ends. Vectorised with cumulative sums, O(N).
+    the ends.
     """
     n = len(values)
-    half = max(1, window // 2)
     index = np.arange(n)
-    lo = np.clip(index - half, 0, n - 1)
-    hi = np.clip(index + half, 0, n - 1)
-    t = time - time[0]
-
-    def window_sum(x):
-        cumulative = np.concatenate([[0.0], np.cumsum(x)])
-        return cumulative[hi + 1] - cumulative[lo]
-
-    count = (hi - lo + 1).astype(float)
-    st, sv, stt, stv = window_sum(t), window_sum(values), window_sum(t * t), window_sum(t * values)
-    return (stv - st * sv / count) / (stt - st * st / count)
+    half = max(1, window // 2)
+    lo, hi = np.clip(index - half, 0, n - 1), np.clip(index + half, 0, n - 1)
+    return window_line(time, values, lo, hi, time)[1]
 
 
 def noise_floor(force: np.ndarray) -> float:
