@@ -1,0 +1,126 @@
+"""python -m ptwin.data.import_afm FILES... --out DIR --probe-radius R --viscosity MU --thickness H0
+
+Vendor force-distance files (JPK .jpk-force, Asylum .ibw, NT-MDT text and whatever
+afmformats reads) into one recording set, one curve per file. What no file knows
+(probe radius, fluid viscosity, sample thickness, and for some formats the spring
+constant, sensitivity or speed) comes from the command line. Only the approach is
+kept: segment 0, cut at the deepest base position (some files, e.g. Asylum .ibw,
+store approach and retract as one segment). The force is kept raw (its baseline
+offset is evidence).
+
+Contact point, when the file has none (``contact_point: estimate`` in meta.yaml):
+a line is fitted to the force against base travel over the first ``--baseline``
+fraction of the approach; its residual gives σ; contact is the last sample after
+which the force stays above the line + 3σ. z is the base travel from there (z < 0
+before contact). Time: the file's own, else uniform over travel / approach speed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import afmformats
+import numpy as np
+import pandas as pd
+
+from ptwin.data.recordings import Meta, RecordingError, load_recordings, write_recordings
+
+
+def estimate_contact(travel: np.ndarray, force: np.ndarray, baseline: float = 0.3) -> int:
+    """Index of the contact sample (see the module docstring)."""
+    count = max(10, int(baseline * len(force)))
+    slope, intercept = np.polyfit(travel[:count], force[:count], 1)
+    excess = force - (slope * travel + intercept)
+    sigma = np.std(excess[:count])
+    below = np.flatnonzero(excess <= 3 * sigma)
+    return int(below[-1]) if below.size else 0
+
+
+def approach_curve(path: Path, speed: float | None, overrides: dict) -> tuple[pd.DataFrame, float, float]:
+    """(curve rows without the id, base speed [m/s], spring constant [N/m]) of one file."""
+    try:
+        datasets = afmformats.load_data(path, meta_override=overrides)
+    except Exception as error:  # afmformats raises format-specific errors
+        raise RecordingError(f"{path}: afmformats cannot read it ({error}); check the file and its format") from None
+    data = datasets[0]
+    approach = np.asarray(data["segment"]) == 0
+    height_column = "height (piezo)" if "height (piezo)" in data.columns else "height (measured)"
+    height = np.asarray(data[height_column], dtype=np.float64)[approach]
+    force = np.asarray(data["force"], dtype=np.float64)[approach]
+    base_speed = speed or data.metadata.get("speed approach")
+    if not base_speed:
+        raise RecordingError(f"{path}: the file gives no approach speed; pass --speed in m/s")
+    spring_constant = float(data.metadata["spring constant"])
+    travel = np.abs(height - height[0])  # the base moves into the sample
+    deepest = int(np.argmax(travel)) + 1
+    travel, force = travel[:deepest], force[:deepest]
+    contact = estimate_contact(travel, force)
+    if "time" in data.columns:
+        time = np.asarray(data["time"], dtype=np.float64)[approach][:deepest]
+        time = time - time[0]
+    else:
+        time = np.linspace(0.0, travel.max() / base_speed, len(travel))
+    rows = pd.DataFrame({"base_speed": float(base_speed), "time": time, "z": travel - travel[contact], "force": force})
+    return rows, float(base_speed), spring_constant
+
+
+def import_files(files: list[Path], out: Path, meta: dict, speed: float | None, overrides: dict) -> None:
+    frames, springs = [], {}
+    for path in files:
+        rows, base_speed, spring_constant = approach_curve(path, speed, overrides)
+        curve = f"v{base_speed * 1e6:.3g}"
+        while any(frame["curve"].iloc[0] == curve for frame in frames):
+            curve += "b"
+        frames.append(rows.assign(curve=curve)[["curve", "base_speed", "time", "z", "force"]])
+        springs[path.name] = spring_constant
+    if max(springs.values()) > 1.01 * min(springs.values()):
+        listing = ", ".join(f"{name} {k:.4g} N/m" for name, k in springs.items())
+        raise RecordingError(
+            f"spring constants differ ({listing}); a recording set is one cantilever: import them apart"
+        )
+    slowest = min(frames, key=lambda frame: frame["base_speed"].iloc[0])["curve"].iloc[0]
+    write_recordings(
+        out,
+        Meta(
+            spring_constant=next(iter(springs.values())),
+            reference_curve=slowest,
+            contact_point="estimate",
+            notes="imported with ptwin.data.import_afm: " + ", ".join(p.name for p in files),
+            **meta,
+        ),
+        pd.concat(frames, ignore_index=True),
+    )
+    load_recordings(out)  # what was written must be a valid set: say so now, not at the first fit
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m ptwin.data.import_afm", description=__doc__.split("\n\n")[1])
+    parser.add_argument("files", nargs="+", type=Path)
+    parser.add_argument("--out", required=True, type=Path)
+    parser.add_argument("--probe-radius", required=True, type=float, help="ρ [m]")
+    parser.add_argument("--viscosity", required=True, type=float, help="μ [Pa s]")
+    parser.add_argument("--thickness", required=True, type=float, help="H0 [m]")
+    parser.add_argument("--sample", default="", help="free text")
+    parser.add_argument("--speed", type=float, help="approach speed [m/s] when the files lack it")
+    parser.add_argument("--spring-constant", type=float, help="[N/m] when the files lack it")
+    parser.add_argument("--sensitivity", type=float, help="[m/V] when the files lack it")
+    args = parser.parse_args(argv)
+    overrides = {k: v for k, v in (("spring constant", args.spring_constant), ("sensitivity", args.sensitivity)) if v}
+    meta = {
+        "probe_radius": args.probe_radius,
+        "fluid_viscosity": args.viscosity,
+        "sample_thickness": args.thickness,
+        "sample": args.sample,
+    }
+    try:
+        import_files(args.files, args.out, meta, args.speed, overrides)
+    except RecordingError as error:
+        print(error, file=sys.stderr)
+        raise SystemExit(2) from None
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
