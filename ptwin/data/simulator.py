@@ -10,7 +10,8 @@ shared/physics-terms.md (each absent unless named in ``effects``):
   K·exp(−m w/ρ); cantilever_drag: b·v on the cantilever, before contact as well;
 - contact_offset: the recorded z is off by δ (depth in the model becomes w − δ).
 
-States (w, q, F_p) are integrated by Radau (stiff: τ_p and C vanish at first contact)
+F_D comes from the closed form, or from the PGD layer (``fluid_basis``), so each
+checks the other. States (w, q, F_p) are integrated by Radau (stiff: τ_p and C vanish at first contact)
 from the exact contact instant. With pore relaxation and no viscous network the
 balance is algebraic in w and is used differentiated (index reduction), where
 C/τ_p = c·R·M stays finite as R → 0.
@@ -22,11 +23,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+import torch
 from scipy.integrate import solve_ivp
 
 from ptwin.data.recordings import Meta
 from ptwin.pgd.reference import force_coefficient
 from ptwin.physics.elastic import hertz_force, hertz_stiffness
+from ptwin.physics.fluid_force import FluidForce
 from ptwin.physics.kinematics import contact_radius
 
 TERMS = {
@@ -57,6 +60,7 @@ class Experiment:
     seed: int = 0
     effects: dict[str, dict[str, float]] = field(default_factory=dict)
     rtol: float = 1e-9
+    fluid_basis: str | None = None  # a PGD basis file: F_D from FluidForce instead of the closed form
 
     def __post_init__(self):
         for term, params in self.effects.items():
@@ -74,8 +78,35 @@ def curve_id(speed: float) -> str:
     return f"v{speed * 1e6:g}"
 
 
-def simulate_curve(experiment: Experiment, speed: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Noise-free (time, recorded z, force, true depth) of one curve at base speed ``speed``."""
+@dataclass
+class CurveSimulation:
+    """One noise-free curve: recorded z and force, true depth, and the residual of the
+    force balance k_s(z − w) − F_sample − b·v at every sample [N]."""
+
+    time: np.ndarray
+    z: np.ndarray
+    force: np.ndarray
+    depth: np.ndarray
+    balance_residual: np.ndarray
+
+
+def fluid_coefficient_law(experiment: Experiment):
+    """C(R, H, K) = F_D/U [N s/m]: the closed form, or the PGD layer when a basis is given."""
+    mu = experiment.fluid_viscosity
+    if experiment.fluid_basis is None:
+        return lambda radius, height, permeability: force_coefficient(height / radius) * mu * radius**3 / permeability
+    layer = FluidForce.load(experiment.fluid_basis, viscosity=mu)
+
+    def pgd(radius, height, permeability):
+        with torch.no_grad():
+            args = (torch.tensor(v, dtype=torch.float64).reshape(-1) for v in (1.0, radius, height, permeability))
+            return layer.evaluate(*args).item()
+
+    return pgd
+
+
+def simulate_curve(experiment: Experiment, speed: float) -> CurveSimulation:
+    """The noise-free curve at base speed ``speed``."""
     e = experiment
     rho, k, mu, H0 = e.probe_radius, e.spring_constant, e.fluid_viscosity, e.sample_thickness
     gamma = e.param("solid_viscosity", "gamma")
@@ -85,29 +116,34 @@ def simulate_curve(experiment: Experiment, speed: float) -> tuple[np.ndarray, np
     drag = e.param("cantilever_drag", "b") * speed
     delta = e.param("contact_offset", "delta")
     lagging = "pore_pressure_relaxation" in e.effects
+    coefficient = fluid_coefficient_law(e)
 
     time = np.linspace(0.0, (e.z_end - e.z_start) / speed, e.samples)
     z_true = e.z_start + speed * time
     contact_time = (drag / k - e.z_start) / speed  # tip reaches the surface: z − drag/k = 0
 
-    def rates(since_contact, state):
+    def rates(since_contact, state, balance=False):
         w, q, pore = state
         radius = contact_radius(np.array([w]), rho)[0]
-        c = force_coefficient((H0 - w) / radius)
         permeability = e.permeability * np.exp(-m * w / rho)
-        fluid_coefficient = c * mu * radius**3 / permeability
+        fluid_coefficient = coefficient(radius, H0 - w, permeability)
+        c = fluid_coefficient * permeability / (mu * radius**3)
         stiffness = hertz_stiffness(np.array([w]), e.effective_modulus, rho)[0]
         # k(z − w) − drag with z − drag/k = v·τ exactly: no cancellation at first contact.
         unbalanced = k * (speed * since_contact - w) - hertz_force(np.array([w]), e.effective_modulus, rho)[0] - g * q
         if not lagging:
             w_rate = unbalanced / (fluid_coefficient + np.pi * gamma * radius)
-            return [w_rate, stiffness * w_rate - q / tau, 0.0]
-        tau_p = mu * radius**2 / (permeability * modulus_m)
-        if gamma > 0:
-            w_rate = (unbalanced - pore) / (np.pi * gamma * radius)
+            pore_rate, pore = 0.0, fluid_coefficient * w_rate
         else:
-            w_rate = (k * speed + g * q / tau + pore / tau_p) / (k + (1 + g) * stiffness + c * radius * modulus_m)
-        return [w_rate, stiffness * w_rate - q / tau, (fluid_coefficient * w_rate - pore) / tau_p]
+            tau_p = mu * radius**2 / (permeability * modulus_m)
+            if gamma > 0:
+                w_rate = (unbalanced - pore) / (np.pi * gamma * radius)
+            else:
+                w_rate = (k * speed + g * q / tau + pore / tau_p) / (k + (1 + g) * stiffness + c * radius * modulus_m)
+            pore_rate = (fluid_coefficient * w_rate - pore) / tau_p
+        if balance:
+            return unbalanced - pore - np.pi * gamma * radius * w_rate
+        return [w_rate, stiffness * w_rate - q / tau, pore_rate]
 
     # Time since contact keeps the first, tiny steps representable. Right after contact
     # every force is negligible and the tip moves with the base: start on w = v·τ0.
@@ -126,8 +162,9 @@ def simulate_curve(experiment: Experiment, speed: float) -> tuple[np.ndarray, np
         raise RuntimeError(f"simulation of the {curve_id(speed)} curve failed: {solution.message}")
     depth = np.minimum(z_true - drag / k, 0.0)
     depth[after] = solution.y[0]
-    force = k * (z_true - depth)
-    return time, z_true + delta, force, depth
+    residual = np.zeros_like(time)
+    residual[after] = [rates(t, y, balance=True) for t, y in zip(solution.t, solution.y.T)]
+    return CurveSimulation(time, z_true + delta, k * (z_true - depth), depth, residual)
 
 
 def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
@@ -135,10 +172,12 @@ def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
     rng = np.random.default_rng(experiment.seed)
     frames = []
     for speed in experiment.base_speeds:
-        time, z, force, _ = simulate_curve(experiment, speed)
-        noisy = force + rng.normal(0.0, experiment.noise_std, force.size)
+        curve = simulate_curve(experiment, speed)
+        noisy = curve.force + rng.normal(0.0, experiment.noise_std, curve.force.size)
         frames.append(
-            pd.DataFrame({"curve": curve_id(speed), "base_speed": speed, "time": time, "z": z, "force": noisy})
+            pd.DataFrame(
+                {"curve": curve_id(speed), "base_speed": speed, "time": curve.time, "z": curve.z, "force": noisy}
+            )
         )
     meta = Meta(
         probe_radius=experiment.probe_radius,
