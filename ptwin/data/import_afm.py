@@ -9,8 +9,8 @@ store approach and retract as one segment). The force is kept raw (its baseline
 offset is evidence).
 
 Contact point, when the file has none (``contact_point: estimate`` in meta.yaml):
-a line is fitted to the force against base travel over the first ``--baseline``
-fraction of the approach; its residual gives σ; contact is the last sample after
+a line is fitted to the force against base travel over the first 30% of the
+approach; its residual gives σ; contact is the last sample after
 which the force stays above the line + 3σ. z is the base travel from there (z < 0
 before contact). Time: the file's own, else uniform over travel / approach speed.
 """

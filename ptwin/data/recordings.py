@@ -178,7 +178,6 @@ def _check_curves(file: Path, frame: pd.DataFrame, meta: Meta) -> None:
                 f"{file}: row {start + 2}: curve {curve!r} resumes after another curve; keep each curve's rows together"
             )
         first_seen[curve] = start
-    seen = set(first_seen)
     for start, stop in zip(starts, np.r_[starts[1:], len(frame)]):
         curve = ids[start]
         rows = frame.iloc[start:stop]
@@ -206,8 +205,8 @@ def _check_curves(file: Path, frame: pd.DataFrame, meta: Meta) -> None:
                 f"{file}: row {row + 2}, curve {curve!r}: depth {depth.max():.3g} m exceeds the probe radius "
                 f"{meta.probe_radius:.3g} m; check z, force and the spring constant in meta.yaml"
             )
-    if meta.reference_curve not in seen:
+    if meta.reference_curve not in first_seen:
         raise RecordingError(
             f"{file.parent / 'meta.yaml'}: reference_curve {meta.reference_curve!r} is not a curve of curves.csv "
-            f"(curves: {', '.join(sorted(seen))})"
+            f"(curves: {', '.join(sorted(first_seen))})"
         )

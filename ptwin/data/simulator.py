@@ -127,7 +127,6 @@ def simulate_curve(experiment: Experiment, speed: float) -> CurveSimulation:
         radius = contact_radius(np.array([w]), rho)[0]
         permeability = e.permeability * np.exp(-m * w / rho)
         fluid_coefficient = coefficient(radius, H0 - w, permeability)
-        c = fluid_coefficient * permeability / (mu * radius**3)
         stiffness = hertz_stiffness(np.array([w]), e.effective_modulus, rho)[0]
         # k(z − w) − drag with z − drag/k = v·τ exactly: no cancellation at first contact.
         unbalanced = k * (speed * since_contact - w) - hertz_force(np.array([w]), e.effective_modulus, rho)[0] - g * q
@@ -139,7 +138,9 @@ def simulate_curve(experiment: Experiment, speed: float) -> CurveSimulation:
             if gamma > 0:
                 w_rate = (unbalanced - pore) / (np.pi * gamma * radius)
             else:
-                w_rate = (k * speed + g * q / tau + pore / tau_p) / (k + (1 + g) * stiffness + c * radius * modulus_m)
+                w_rate = (k * speed + g * q / tau + pore / tau_p) / (
+                    k + (1 + g) * stiffness + fluid_coefficient / tau_p
+                )
             pore_rate = (fluid_coefficient * w_rate - pore) / tau_p
         if balance:
             return unbalanced - pore - np.pi * gamma * radius * w_rate

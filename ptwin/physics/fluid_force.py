@@ -68,8 +68,8 @@ class FluidForce(nn.Module):
         u, r, h = (t.expand(shape).reshape(-1) for t in (velocity, contact_radius, height))
         smallest = self.functions[2].minimum
         scale = 1.0
-        if bool((r < smallest).any()):
-            below = r < smallest
+        below = r < smallest
+        if bool(below.any()):
             safe_r = torch.where(r > 0, r, torch.full_like(r, smallest))
             scale = torch.where(below, (r / smallest) ** 3, torch.ones_like(r))
             h = torch.where(below, h * smallest / safe_r, h)
