@@ -11,6 +11,7 @@ from torch import nn
 
 from ptwin.physics.fluid_force import FluidForce
 from ptwin.physics.kinematics import CurveKinematics, contact_radius, window_line
+from ptwin.physics.samples import Samples
 
 
 def hertz_force(depth: np.ndarray, effective_modulus: float, probe_radius: float) -> np.ndarray:
@@ -27,13 +28,16 @@ def hertz_stiffness(depth: np.ndarray, effective_modulus: float, probe_radius: f
 class ReferenceElasticLaw(nn.Module):
     """F_el(w) [N] read off the reference (slowest) curve, differentiable in w and K.
 
-    The reference force is smoothed onto ``nodes`` depths (local lines over ±1 node
-    spacing, then isotonic: the solid law is monotone). Self-consistent (default,
-    ``fluid`` given): its own Darcy force at the current K is subtracted at each node,
-    F_el = F_ref − F_D(U_ref, K, R, H), so K flows through the law into every fit. With
-    ``fluid=None`` the reference curve is taken as purely elastic (the paper's variant).
-    Between nodes: linear interpolation (monotone nodes stay monotone); beyond the
-    deepest node: the last segment. ``probe_radius`` ρ and ``sample_thickness`` H0 [m].
+    The reference force is smoothed onto ``nodes`` depths by local lines in w^1.5 over
+    ``smoothing`` (fraction) of the curve's samples — a sphere's force is close to
+    linear in w^1.5, so the smoothing adds no bias where the curve bends — then made
+    isotonic (the solid law is monotone). The nodes also carry the reference curve's
+    time, velocity, contact radius and height (``node_samples``), so that a force model
+    can subtract its own rate-dependent forces there. Self-consistent (``fluid`` given):
+    F_el = F_ref − F_D(U_ref, K, R, H); with ``fluid=None`` the reference curve is taken
+    as purely elastic (the paper's variant). Between nodes: linear interpolation
+    (monotone nodes stay monotone); beyond the deepest node: the last segment.
+    ``probe_radius`` ρ and ``sample_thickness`` H0 [m].
     """
 
     def __init__(
@@ -43,26 +47,46 @@ class ReferenceElasticLaw(nn.Module):
         sample_thickness: float,
         fluid: FluidForce | None,
         nodes: int = 200,
+        smoothing: float = 0.05,
     ):
         super().__init__()
         use = reference.in_contact
         order = np.argsort(reference.depth[use])
         depth, force = reference.depth[use][order], reference.force[use][order]
-        velocity = reference.velocity[use][order]
         grid = np.linspace(0.0, depth[-1], nodes)
-        spacing = grid[1] - grid[0]
-        lo = np.searchsorted(depth, grid - spacing, side="left").clip(0, len(depth) - 2)
-        hi = (np.searchsorted(depth, grid + spacing, side="right") - 1).clip(lo + 1, len(depth) - 1)
-        smoothed, _ = window_line(depth, force, lo, hi, grid)
-        local_velocity, _ = window_line(depth, velocity, lo, hi, grid)
-        smoothed = scipy.optimize.isotonic_regression(smoothed).x
+        position = np.searchsorted(depth, grid)
+        half = max(int(smoothing * len(depth) / 2), int(np.ceil(len(depth) / nodes)), 2)
+        lo = (position - half).clip(0, len(depth) - 3)
+        hi = (position + half).clip(lo + 2, len(depth) - 1)
+
+        def local(values):
+            return window_line(depth**1.5, values, lo, hi, grid**1.5)[0]
+
         as_tensor = partial(torch.tensor, dtype=torch.float64)
         self.register_buffer("depth_nodes", as_tensor(grid))
-        self.register_buffer("reference_force", as_tensor(smoothed))
-        self.register_buffer("velocity", as_tensor(local_velocity))
+        self.register_buffer("reference_force", as_tensor(scipy.optimize.isotonic_regression(local(force)).x))
+        self.register_buffer("time", as_tensor(np.maximum.accumulate(local(reference.time[use][order]))))
+        self.register_buffer("velocity", as_tensor(local(reference.velocity[use][order])))
         self.register_buffer("radius", as_tensor(contact_radius(grid, probe_radius)))
         self.register_buffer("height", as_tensor(sample_thickness - grid))
+        self.base_speed = reference.base_speed
         self.fluid = fluid
+
+    def node_samples(self) -> Samples:
+        """The reference curve at the depth nodes, as one curve of samples."""
+        n = self.depth_nodes.numel()
+        return Samples(
+            time=self.time,
+            depth=self.depth_nodes,
+            velocity=self.velocity,
+            base_speed=torch.full_like(self.time, self.base_speed),
+            force=self.reference_force,
+            start=torch.arange(n, device=self.time.device) == 0,
+            curve=torch.zeros(n, dtype=torch.long, device=self.time.device),
+            in_contact=torch.ones(n, dtype=torch.bool, device=self.time.device),
+            noise_floor=torch.zeros_like(self.time),
+            curve_ids=("reference",),
+        )
 
     def node_forces(self, permeability: torch.Tensor | None = None) -> torch.Tensor:
         """F_el at the depth nodes for K = ``permeability`` (default: the fluid layer's)."""
@@ -71,10 +95,26 @@ class ReferenceElasticLaw(nn.Module):
         k = self.fluid.permeability if permeability is None else permeability
         return self.reference_force - self.fluid.evaluate(self.velocity, self.radius, self.height, k)
 
-    def forward(self, depth: torch.Tensor, permeability: torch.Tensor | None = None) -> torch.Tensor:
-        values = self.node_forces(permeability)
+    def bracket(self, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(index of the node below, fraction of the way to the next) for each depth."""
         spacing = self.depth_nodes[1] - self.depth_nodes[0]
         position = depth.clamp(min=0.0) / spacing
-        index = position.detach().floor().clamp(0, values.numel() - 2).long()
-        t = position - index
-        return values[index] * (1 - t) + values[index + 1] * t
+        index = position.detach().floor().clamp(0, self.depth_nodes.numel() - 2).long()
+        return index, position - index
+
+    def interpolate(self, node_values: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
+        """Linear interpolation of values at the depth nodes to ``depth`` [m]."""
+        index, t = self.bracket(depth)
+        return node_values[index] * (1 - t) + node_values[index + 1] * t
+
+    def forward(self, depth: torch.Tensor, permeability: torch.Tensor | None = None) -> torch.Tensor:
+        """F_el(depth); ``permeability`` one K [m²] or one per depth (pointwise identification)."""
+        if permeability is None or permeability.numel() == 1 or self.fluid is None:
+            return self.interpolate(self.node_forces(permeability), depth)
+        index, t = self.bracket(depth)
+
+        def at(nodes):
+            fluid = self.fluid.evaluate(self.velocity[nodes], self.radius[nodes], self.height[nodes], permeability)
+            return self.reference_force[nodes] - fluid
+
+        return at(index) * (1 - t) + at(index + 1) * t

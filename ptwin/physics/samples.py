@@ -1,0 +1,57 @@
+"""Samples: the recorded curves as flat float64 tensors, ready for the force models.
+
+Curves are concatenated in time order; ``start`` marks the first sample of each, so
+hereditary terms (recursions over time) restart there. Every sample is kept: a model
+runs over whole curves (the history matters) and fits choose samples by index.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import torch
+
+from ptwin.physics.kinematics import CurveKinematics
+
+
+@dataclass
+class Samples:
+    """Per-sample tensors of shape (S,), SI units."""
+
+    time: torch.Tensor  # [s] since the start of the curve
+    depth: torch.Tensor  # recorded indentation depth w [m]
+    velocity: torch.Tensor  # U = dw/dt [m/s]
+    base_speed: torch.Tensor  # [m/s]
+    force: torch.Tensor  # measured force [N] (0 where none was measured)
+    start: torch.Tensor  # bool: first sample of a curve
+    curve: torch.Tensor  # long: index into ``curve_ids``
+    in_contact: torch.Tensor  # bool: samples a fit may use
+    noise_floor: torch.Tensor  # [N], the curve's
+    curve_ids: tuple[str, ...]
+
+    @classmethod
+    def from_curves(cls, curves: list[CurveKinematics]) -> Samples:
+        def cat(values):
+            return torch.from_numpy(np.concatenate(values))
+
+        starts = [np.arange(len(c.time)) == 0 for c in curves]
+        return cls(
+            time=cat([c.time for c in curves]),
+            depth=cat([c.depth for c in curves]),
+            velocity=cat([c.velocity for c in curves]),
+            base_speed=cat([np.full(len(c.time), c.base_speed) for c in curves]),
+            force=cat([c.force for c in curves]),
+            start=cat(starts),
+            curve=cat([np.full(len(c.time), i) for i, c in enumerate(curves)]),
+            in_contact=cat([c.in_contact for c in curves]),
+            noise_floor=cat([np.full(len(c.time), c.noise_floor) for c in curves]),
+            curve_ids=tuple(c.curve for c in curves),
+        )
+
+    def __len__(self) -> int:
+        return self.time.numel()
+
+    def to(self, device: str | torch.device) -> Samples:
+        moved = {f.name: getattr(self, f.name) for f in fields(self)}
+        return Samples(**{k: v.to(device) if torch.is_tensor(v) else v for k, v in moved.items()})
