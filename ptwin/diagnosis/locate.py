@@ -1,0 +1,84 @@
+"""Locate the mismatch: where residuals rise above the noise floor, and whether they
+are structure or noise.
+
+The whiteness statistic of a curve splits its residual (in noise units, time order)
+into blocks of ``block`` samples: for white noise each block mean has variance
+1/block, so W = mean(block · mean²) ≈ 1; structure that persists over a block
+inflates it by the block length.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from ptwin.physics.samples import Samples
+
+
+@dataclass
+class Mismatch:
+    curve: str
+    base_speed: float  # [m/s]
+    depth_from: float  # [m] first and last depth of the blocks off the noise floor
+    depth_to: float
+    rms_residual: float  # [N] over that range
+    noise_floor: float  # [N]
+    whiteness: float  # W of the curve's whole residual
+
+
+def block_means(scaled: torch.Tensor, block: int) -> torch.Tensor:
+    """Means of consecutive blocks of ``block`` samples (a short tail joins the last block)."""
+    count = max(scaled.numel() // block, 1)
+    edges = torch.linspace(0, scaled.numel(), count + 1).long()
+    return torch.stack([scaled[a:b].mean() for a, b in zip(edges[:-1], edges[1:])]), edges
+
+
+def whiteness(scaled: torch.Tensor, block: int) -> float:
+    """W = mean over blocks of n_b·mean_b² for a residual in noise units (≈ 1 when white)."""
+    means, edges = block_means(scaled, block)
+    return (torch.diff(edges) * means.square()).mean().item()
+
+
+def pooled_whiteness(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block: int) -> float:
+    """W over the blocks of every curve (``residual`` in N, on ``index``, time-ordered)."""
+    values = [whiteness(_curve_residual(samples, residual, index, i)[0], block) for i in range(len(samples.curve_ids))]
+    return sum(values) / len(values)
+
+
+def _curve_residual(samples, residual, index, curve):
+    mine = samples.curve[index] == curve
+    return residual[mine] / samples.noise_floor[index][mine], index[mine]
+
+
+def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block: int, threshold: float):
+    """Per curve, the depth range where the residual (N, on ``index``) is structure above the noise.
+
+    A curve is listed when its whiteness exceeds ``threshold``; its range spans the blocks
+    whose mean is more than 3 standard errors off zero.
+    """
+    found = []
+    for i, curve in enumerate(samples.curve_ids):
+        scaled, where = _curve_residual(samples, residual, index, i)
+        w = whiteness(scaled, block)
+        if w <= threshold:
+            continue
+        means, edges = block_means(scaled, block)
+        off = (means.abs() * torch.diff(edges).sqrt() > 3.0).nonzero().squeeze(1)
+        if off.numel() == 0:
+            continue
+        lo, hi = edges[off.min()].item(), edges[off.max() + 1].item()
+        depth = samples.depth[where[lo:hi]]
+        noise = samples.noise_floor[where[0]].item()
+        found.append(
+            Mismatch(
+                curve=curve,
+                base_speed=samples.base_speed[where[0]].item(),
+                depth_from=depth.min().item(),
+                depth_to=depth.max().item(),
+                rms_residual=(scaled[lo:hi] * noise).square().mean().sqrt().item(),
+                noise_floor=noise,
+                whiteness=w,
+            )
+        )
+    return found

@@ -1,0 +1,104 @@
+"""Stage 1 (paper §5.1): the apparent permeability K(w) of every sample, by Newton.
+
+For each sample, F = F_el(w; K) + F_D(U, K, R, H) is solved for K (Newton on log K,
+all samples at once; the elastic law is self-consistent, so K enters it too). Where
+the measured force does not exceed the elastic law by a fluid force of the right
+sign there is no positive root: the sample gets NaN and is counted, never dropped
+silently. The plateau (deeper part of each curve) gives one K per speed; a weighted
+line of plateau K against log10(speed) gives the trend and its significance.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch.func import jvp
+
+from ptwin.physics.elastic import ReferenceElasticLaw
+from ptwin.physics.fluid_force import FluidForce
+from ptwin.physics.model import smooth_contact_radius
+from ptwin.physics.samples import Samples
+
+
+@dataclass
+class ApparentPermeability:
+    """K(w) per sample [m²] (NaN: no root) and its plateau per curve."""
+
+    permeability: torch.Tensor  # (S,)
+    plateau: dict[str, dict[str, float]]  # curve → {base_speed, mean, std_error, samples, without_root}
+    slope: float  # d plateau K / d log10(speed) [m²/decade]
+    slope_std: float
+
+    @property
+    def slope_significance(self) -> float:
+        """|slope| in standard errors (> 3: K depends on speed; the base model leaves physics out)."""
+        return abs(self.slope) / self.slope_std if self.slope_std > 0 else math.inf
+
+
+def apparent_permeability(
+    elastic: ReferenceElasticLaw,
+    fluid: FluidForce,
+    samples: Samples,
+    probe_radius: float,
+    sample_thickness: float,
+    start: float,
+    iterations: int = 40,
+    plateau_from: float = 0.5,
+) -> ApparentPermeability:
+    """Newton from K = ``start`` [m²]; the plateau is the part deeper than ``plateau_from`` × the curve's depth."""
+    radius = smooth_contact_radius(samples.depth, probe_radius)
+    height = sample_thickness - samples.depth
+
+    def residual(log_k):
+        k = log_k.exp()
+        return samples.force - elastic(samples.depth, k) - fluid.evaluate(samples.velocity, radius, height, k)
+
+    log_k = torch.full_like(samples.force, math.log(start))
+    with torch.no_grad():
+        for _ in range(iterations):
+            value, slope = jvp(residual, (log_k,), (torch.ones_like(log_k),))
+            step = (value / slope).nan_to_num(0.0).clamp(-2.0, 2.0)
+            log_k = log_k - step
+            if step.abs().max() < 1e-12:
+                break
+        final = residual(log_k)
+    solved = (final.abs() <= 1e-6 * samples.force.abs().clamp(min=samples.noise_floor)) & samples.in_contact
+    permeability = log_k.exp().where(solved, torch.full_like(log_k, math.nan))
+
+    plateau = {}
+    for i, curve in enumerate(samples.curve_ids):
+        mine = (samples.curve == i) & samples.in_contact
+        deep = mine & (samples.depth >= plateau_from * samples.depth[mine].max())
+        values = permeability[deep]
+        values = values[~values.isnan()]
+        plateau[curve] = {
+            "base_speed": samples.base_speed[mine][0].item(),
+            "mean": values.mean().item() if values.numel() else math.nan,
+            "std_error": (values.std() / math.sqrt(values.numel())).item() if values.numel() > 1 else math.nan,
+            "samples": int(values.numel()),
+            "without_root": int((deep & permeability.isnan()).sum()),
+        }
+    slope, slope_std = _weighted_slope(plateau)
+    return ApparentPermeability(permeability, plateau, slope, slope_std)
+
+
+def _weighted_slope(plateau: dict[str, dict[str, float]]) -> tuple[float, float]:
+    """Slope of mean K against log10(speed), weights 1/std_error², and its standard error."""
+    rows = [
+        p for p in plateau.values() if np.isfinite(p["mean"]) and np.isfinite(p["std_error"]) and p["std_error"] > 0
+    ]
+    if len(rows) < 2:
+        return math.nan, math.nan
+    x = np.log10([p["base_speed"] for p in rows])
+    y = np.array([p["mean"] for p in rows])
+    w = 1.0 / np.array([p["std_error"] for p in rows]) ** 2
+    xm = (w * x).sum() / w.sum()
+    sxx = (w * (x - xm) ** 2).sum()
+    slope = (w * (x - xm) * y).sum() / sxx
+    # The plateau scatter beyond its own error bars (model error) inflates the slope's error honestly.
+    dof = max(len(rows) - 2, 1)
+    chi2 = (w * (y - (y * w).sum() / w.sum() - slope * (x - xm)) ** 2).sum() / dof
+    return float(slope), float(math.sqrt(max(chi2, 1.0) / sxx))

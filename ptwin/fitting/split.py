@@ -1,0 +1,54 @@
+"""Train/validation/test split of the fitted samples (in-contact samples of the
+non-reference curves): random over samples, or by curve (a whole speed held out)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from ptwin.physics.samples import Samples
+
+
+@dataclass
+class Split:
+    train: torch.Tensor  # sorted sample indices
+    val: torch.Tensor
+    test: torch.Tensor
+    held_out_curve: str | None = None
+
+
+def split_samples(
+    samples: Samples,
+    fractions: tuple[float, float, float] = (0.70, 0.15, 0.15),
+    mode: str = "random",
+    held_out_curve: str | None = None,
+    seed: int = 0,
+) -> Split:
+    """``mode='random'``: samples drawn by ``fractions``; ``mode='curve'``: the test set is the whole
+    ``held_out_curve`` (default: the fastest) and train/val share the rest in the ratio of their fractions."""
+    if len(fractions) != 3 or min(fractions) <= 0 or abs(sum(fractions) - 1) > 1e-9:
+        raise ValueError(f"split.fractions must be three positive numbers summing to 1, got {list(fractions)}")
+    generator = torch.Generator().manual_seed(seed)
+    eligible = torch.nonzero(samples.in_contact).squeeze(1)
+
+    def shuffled(index):
+        return index[torch.randperm(index.numel(), generator=generator)]
+
+    if mode == "random":
+        order = shuffled(eligible)
+        n_train, n_val = int(fractions[0] * order.numel()), int(fractions[1] * order.numel())
+        parts = order[:n_train], order[n_train : n_train + n_val], order[n_train + n_val :]
+        return Split(*(p.sort().values for p in parts))
+    if mode != "curve":
+        raise ValueError(f"split.mode must be 'random' or 'curve', got {mode!r}")
+    if held_out_curve is None:
+        held_out_curve = samples.curve_ids[int(samples.base_speed.argmax())]
+    if held_out_curve not in samples.curve_ids:
+        raise ValueError(
+            f"split.held_out_curve {held_out_curve!r} is not a fitted curve; pick one of {samples.curve_ids}"
+        )
+    held = samples.curve[eligible] == samples.curve_ids.index(held_out_curve)
+    rest = shuffled(eligible[~held])
+    n_train = int(fractions[0] / (fractions[0] + fractions[1]) * rest.numel())
+    return Split(rest[:n_train].sort().values, rest[n_train:].sort().values, eligible[held], held_out_curve)
