@@ -52,8 +52,8 @@ class PhysicsFit:
 
 
 def scaled_residual(model, samples: Samples, index: torch.Tensor):
-    """θ ↦ (model − measured)/noise floor on ``index``, for the model's parameters as θ."""
-    vector = ParameterVector(model, [n for n, _ in model.named_parameters()])
+    """θ ↦ (model − measured)/noise floor on ``index``, θ: the model's parameters that require grad."""
+    vector = ParameterVector(model, [n for n, p in model.named_parameters() if p.requires_grad])
     force, noise = samples.force[index], samples.noise_floor[index]
 
     def residual(theta):
@@ -70,7 +70,7 @@ def rmse(model: ForceModel, samples: Samples, index: torch.Tensor) -> float:
 
 
 def fit_physics(model: ForceModel, samples: Samples, index: torch.Tensor, iterations: int = 60) -> PhysicsFit:
-    """Fit every parameter of ``model`` (K and its terms) to ``samples[index]`` by LM."""
+    """Fit the free parameters of ``model`` (K and its terms; frozen ones stay) to ``samples[index]`` by LM."""
     vector, residual = scaled_residual(model, samples, index)
     solver = LevenbergMarquardt(residual, vector.get())
     theta = solver.run(iterations)
@@ -86,8 +86,9 @@ def fit_physics(model: ForceModel, samples: Samples, index: torch.Tensor, iterat
     params, param_std, corr, violations = {}, {}, {}, {}
     for name, term in model.terms.items():
         params[name] = term.values()
-        param_std[name] = term.physical_std({k.split(".")[-1]: v for k, v in raw_std.items() if f".{name}." in k})
-        corr[name] = {p: raw_corr[f"terms.{name}.{term.raw_name(p)}"] for p in term.PARAMS}
+        raw = {p: f"terms.{name}.{term.raw_name(p)}" for p in term.PARAMS}
+        param_std[name] = term.physical_std({term.raw_name(p): raw_std.get(key, 0.0) for p, key in raw.items()})
+        corr[name] = {p: raw_corr.get(key, 0.0) for p, key in raw.items()}
         reason = term.violation()
         if reason:
             violations[name] = reason
@@ -115,9 +116,9 @@ def fit_with_starts(make_model, terms: tuple[str, ...], samples: Samples, index:
     best, best_cost = None, math.inf
     for values in starts:
         model = make_model(terms, values)
-        _, residual = scaled_residual(model, samples, index)
+        vector, residual = scaled_residual(model, samples, index)
         with torch.no_grad():
-            cost = residual(ParameterVector(model, [n for n, _ in model.named_parameters()]).get()).square().sum()
+            cost = residual(vector.get()).square().sum()
         if cost < best_cost:
             best, best_cost = model, cost.item()
     return fit_physics(best, samples, index, iterations)

@@ -24,6 +24,7 @@ def smooth_contact_radius(depth: torch.Tensor, probe_radius: float) -> torch.Ten
 class ForceModel(nn.Module):
     """Predicted force [N] of every sample: F_el(w) + F_D(U, K_eff, R, H) + terms.
 
+    ``elastic`` is the reference curve's law read without a fluid (``fluid=None``):
     ``terms`` names vocabulary terms (``ptwin.physics.terms``); ``values`` their starting
     parameters ({term: {param: value}}). Self-consistent (default): the elastic law is the
     reference curve minus this model's own rate-dependent forces there (F_D and every
@@ -46,6 +47,12 @@ class ForceModel(nn.Module):
         unknown = set(terms) - set(VOCABULARY)
         if unknown:
             raise ValueError(f"unknown term(s) {sorted(unknown)}; the vocabulary is {', '.join(VOCABULARY)}")
+        if elastic.fluid is not None:
+            # A shared parameter would be tied under torch.func.functional_call, which loses it.
+            raise ValueError(
+                "ForceModel: give the elastic law without a fluid layer (fluid=None); the model "
+                "subtracts its own rate-dependent forces from the reference curve"
+            )
         self.fluid = fluid  # first: K is then named fluid.log_permeability
         self.elastic = elastic
         self.probe_radius, self.sample_thickness = probe_radius, sample_thickness
