@@ -189,6 +189,9 @@ def train(cfg: DictConfig, output_dir: Path) -> dict:
         "test_rmse": rmse_of(twin, samples, split.test),  # the test set, touched once
         "network_parameters": sum(p.numel() for p in twin.network.parameters()),
     }
+    with torch.no_grad():
+        fitted = torch.cat([split.train, split.val, split.test])
+        hybrid_record["network_rms"] = twin.network(samples)[fitted].square().mean().sqrt().item()
     results["stages"]["hybrid"] = hybrid_record
     results["noise_floor"] = noise
 
@@ -202,7 +205,9 @@ def train(cfg: DictConfig, output_dir: Path) -> dict:
         payload = diagnosis.to_json()
     else:
         payload = provisional_diagnosis(results, noise)
-    (output_dir / "diagnosis.json").write_text(json.dumps(payload, indent=2, allow_nan=False, default=float))
+    (output_dir / "diagnosis.json").write_text(
+        json.dumps(payload, indent=2, allow_nan=False, default=float, ensure_ascii=False)
+    )
     corrected_per_speed = None
     if diagnosis is not None and diagnosis.chosen:
         values = diagnosis.corrected.fit.params

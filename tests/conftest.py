@@ -1,8 +1,17 @@
-import pytest
+from pathlib import Path
 
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+import train as train_script
+from ptwin.data.recordings import write_recordings
+from ptwin.data.simulator import Experiment, simulate
 from ptwin.pgd.build import build_basis
+from ptwin.pgd.cache import cached_basis
 from ptwin.pgd.config import Grid, PGDConfig, PlaneMesh, ThicknessMesh
 from ptwin.pgd.enrichment import EnrichmentSettings
+from ptwin.schema import register
 
 
 def small_config(**overrides) -> PGDConfig:
@@ -30,3 +39,53 @@ def basis_file(small_basis, tmp_path_factory):
     path = tmp_path_factory.mktemp("basis") / "small.pt"
     small_basis.save(path)
     return path
+
+
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+
+
+def compose_train(*overrides):
+    """The train.py config as Hydra composes it, with ``overrides``."""
+    register()
+    with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
+        return compose(config_name="train", overrides=list(overrides))
+
+
+@pytest.fixture(scope="session")
+def coarse_cache(tmp_path_factory):
+    """A cache directory holding the ``coarse`` preset's basis (built once per session)."""
+    folder = tmp_path_factory.mktemp("cache")
+    cfg = compose_train("pgd=coarse", "data.path=unused", f"cache_dir={folder}")
+    cached_basis(PGDConfig.from_dict(OmegaConf.to_container(cfg.pgd, resolve=True)), folder, progress=lambda _: None)
+    return folder
+
+
+def simulated_set(folder: Path, **experiment) -> Path:
+    """A small synthetic recording set (4 speeds × 600 samples) in ``folder``."""
+    values = dict(base_speeds=(0.5e-6, 4e-6, 20e-6, 80e-6), samples=600)
+    values.update(experiment)
+    write_recordings(folder, *simulate(Experiment(**values)))
+    return folder
+
+
+def run(folder, cache, output, *overrides):
+    cfg = compose_train(f"data.path={folder}", "pgd=coarse", f"cache_dir={cache}", *overrides)
+    return train_script.train(cfg, output)
+
+
+@pytest.fixture(scope="session")
+def clean_run(tmp_path_factory, coarse_cache):
+    folder = simulated_set(tmp_path_factory.mktemp("clean"))
+    output = tmp_path_factory.mktemp("clean_run")
+    return run(folder, coarse_cache, output), output
+
+
+@pytest.fixture(scope="session")
+def viscous_run(tmp_path_factory, coarse_cache):
+    folder = simulated_set(tmp_path_factory.mktemp("viscous"), effects={"solid_viscosity": {"gamma": 5.0}})
+    return run(folder, coarse_cache, tmp_path_factory.mktemp("viscous_run"))
+
+
+@pytest.fixture(scope="session")
+def demo_run(tmp_path_factory, coarse_cache):
+    return run(Path(__file__).resolve().parents[1] / "data" / "demo", coarse_cache, tmp_path_factory.mktemp("demo_run"))

@@ -1,0 +1,38 @@
+"""Levenberg–Marquardt: a nonlinear truth recovered, the covariance of a linear fit exact."""
+
+import torch
+
+from ptwin.fitting.lm import LevenbergMarquardt, covariance
+
+
+def test_recovers_an_exponential_decay_from_a_poor_start():
+    t = torch.linspace(0, 4, 200, dtype=torch.float64)
+    truth = torch.tensor([2.0, -1.3], dtype=torch.float64)  # amplitude, log rate
+
+    def residual(theta):
+        return theta[0] * torch.exp(-theta[1].exp() * t) - truth[0] * torch.exp(-truth[1].exp() * t)
+
+    solver = LevenbergMarquardt(residual, torch.tensor([0.5, 0.5], dtype=torch.float64))
+    theta = solver.run(200, tolerance=0.0)
+    torch.testing.assert_close(theta, truth, rtol=1e-8, atol=1e-8)
+
+
+def test_learning_rate_scales_each_step():
+    def residual(theta):
+        return theta - torch.tensor([1.0, 1.0], dtype=torch.float64)
+
+    solver = LevenbergMarquardt(residual, torch.zeros(2, dtype=torch.float64), torch.tensor([1.0, 0.5]), damping=0.0)
+    solver.step()
+    torch.testing.assert_close(solver.theta, torch.tensor([1.0, 0.5], dtype=torch.float64))
+
+
+def test_covariance_of_a_straight_line_fit_matches_the_textbook():
+    generator = torch.Generator().manual_seed(1)
+    x = torch.linspace(0, 1, 50, dtype=torch.float64)
+    y = 3 * x + 1 + 0.1 * torch.randn(50, generator=generator, dtype=torch.float64)
+    design = torch.stack([x, torch.ones_like(x)], 1)
+    solver = LevenbergMarquardt(lambda theta: design @ theta - y, torch.zeros(2, dtype=torch.float64))
+    theta = solver.run(20)
+    jacobian, r = solver.linearise(theta)
+    s2 = (r @ r) / 48
+    torch.testing.assert_close(covariance(jacobian, r), s2 * torch.linalg.inv(design.T @ design))

@@ -1,0 +1,50 @@
+"""Hereditary terms: the parallel scan against a loop, the lags against closed forms."""
+
+import math
+
+import pytest
+import torch
+
+from ptwin.physics.recurrence import first_order_lag, linear_recurrence, relaxation_integral
+
+
+def test_scan_equals_the_sequential_recurrence_and_restarts():
+    generator = torch.Generator().manual_seed(0)
+    a = torch.rand(1000, generator=generator, dtype=torch.float64)
+    b = torch.randn(1000, generator=generator, dtype=torch.float64)
+    a[[0, 400]] = 0.0  # two curves
+    expected, x = torch.empty_like(b), 0.0
+    for i in range(1000):
+        x = a[i] * x + b[i]
+        expected[i] = x
+    torch.testing.assert_close(linear_recurrence(a, b), expected, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("samples", [50, 500])
+def test_lag_of_a_ramp_is_exact_on_any_grid(samples):
+    # τ y' + y = t from y(0) = 0: y = t − τ(1 − e^{−t/τ}), exact for inputs linear between samples.
+    tau = 0.3
+    time = torch.linspace(0, 2, samples, dtype=torch.float64) ** 1.5
+    start = torch.arange(samples) == 0
+    lagged = first_order_lag(time, torch.full_like(time, tau), time, start)
+    torch.testing.assert_close(lagged, time - tau * (1 - torch.exp(-time / tau)), rtol=0, atol=1e-13)
+
+
+def test_relaxation_integral_of_a_ramp_and_zero_time_constant():
+    # q = ∫ e^{−(t−s)/τ} ds for s' = 1: q = τ(1 − e^{−t/τ}); τ = 0 leaves no memory.
+    time = torch.linspace(0, 3, 301, dtype=torch.float64)
+    start = torch.arange(301) == 0
+    q = relaxation_integral(time, torch.full_like(time, 0.5), time, start)
+    torch.testing.assert_close(q, 0.5 * (1 - torch.exp(-time / 0.5)), rtol=0, atol=1e-13)
+    assert torch.equal(first_order_lag(time.sin(), torch.zeros_like(time), time, start), time.sin())
+
+
+def test_lag_gradient_in_the_time_constant():
+    time = torch.linspace(0, 1, 40, dtype=torch.float64)
+    start = torch.arange(40) == 0
+    forcing = time**2
+
+    def lag(log_tau):
+        return first_order_lag(forcing, log_tau.exp().expand(40), time, start)
+
+    assert torch.autograd.gradcheck(lag, (torch.tensor(math.log(0.2), dtype=torch.float64, requires_grad=True),))

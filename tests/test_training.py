@@ -1,0 +1,111 @@
+"""train.py's chain on generated data with a known truth, its checkpoints, and its sweeps."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+import torch
+
+from ptwin.fitting import checkpoint
+from tests.conftest import CONFIGS, run, simulated_set
+
+pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+TRUE_K = 2.0e-16
+
+
+def test_clean_data_every_stage_finds_k_and_nothing_else(clean_run):
+    outcome, output = clean_run
+    stages, noise = outcome["results"]["stages"], outcome["results"]["noise_floor"]
+    for name in ("elastic_darcy", "viscous", "hybrid"):
+        assert stages[name]["permeability"] == pytest.approx(TRUE_K, rel=0.01), name
+    gamma = stages["viscous"]["params"]["solid_viscosity"]
+    assert abs(gamma["gamma"]) < 3 * stages["viscous"]["param_std"]["solid_viscosity"]["gamma"] + 0.05
+    assert stages["hybrid"]["network_rms"] < noise
+    assert stages["hybrid"]["network_parameters"] == 25
+    for name in (
+        "results.json",
+        "diagnosis.json",
+        "report.md",
+        "checkpoint.pt",
+        "fig4_apparent_permeability_depth.png",
+    ):
+        assert (output / name).is_file(), name
+    assert list((output / "tensorboard").glob("events.*"))
+
+
+def test_stage_two_recovers_a_concealed_viscosity(viscous_run):
+    gamma = viscous_run["results"]["stages"]["viscous"]["params"]["solid_viscosity"]["gamma"]
+    assert gamma == pytest.approx(5.0, rel=0.05)
+
+
+def quick(*extra):
+    return (
+        "diagnosis.enabled=false",
+        "optim.hybrid.regularisations=[1.0e-2,1.0]",
+        "optim.hybrid.iterations=12",
+        "optim.hybrid.checkpoint_every=4",
+        *extra,
+    )
+
+
+def test_same_seed_same_result_and_a_killed_run_resumes_to_it(tmp_path, coarse_cache, monkeypatch):
+    folder = simulated_set(tmp_path / "set", base_speeds=(0.5e-6, 8e-6, 80e-6), samples=400)
+    first = run(folder, coarse_cache, tmp_path / "a", *quick())["results"]["stages"]["hybrid"]
+    again = run(folder, coarse_cache, tmp_path / "b", *quick())["results"]["stages"]["hybrid"]
+    assert first == again  # bit for bit
+
+    saves, original = [], checkpoint.save_checkpoint
+
+    def killed_after_second(*args):
+        original(*args)
+        saves.append(1)
+        if len(saves) == 2:
+            raise KeyboardInterrupt  # the process dies right after a checkpoint landed
+
+    monkeypatch.setattr(checkpoint, "save_checkpoint", killed_after_second)
+    with pytest.raises(KeyboardInterrupt):
+        run(folder, coarse_cache, tmp_path / "c", *quick())
+    monkeypatch.setattr(checkpoint, "save_checkpoint", original)
+    ckpt = tmp_path / "c" / "checkpoint.pt"
+    resumed = run(folder, coarse_cache, tmp_path / "d", *quick(f"ckpt_path={ckpt}"))["results"]["stages"]["hybrid"]
+    assert resumed == first
+
+    with pytest.raises(checkpoint.CheckpointError, match="model.hidden: checkpoint 6, now 4"):
+        run(folder, coarse_cache, tmp_path / "e", *quick(f"ckpt_path={ckpt}", "model.hidden=4"))
+
+
+def test_a_multirun_sweep_leaves_one_run_per_value(tmp_path, coarse_cache):
+    folder = simulated_set(tmp_path / "set", base_speeds=(0.5e-6, 80e-6), samples=300)
+    sweep = tmp_path / "sweep"
+    result = subprocess.run(
+        [
+            sys.executable,
+            "train.py",
+            "-m",
+            "model.hidden=2,3",
+            f"data.path={folder}",
+            "pgd=coarse",
+            f"cache_dir={coarse_cache}",
+            f"hydra.sweep.dir={sweep}",
+            *quick("optim.hybrid.iterations=3"),
+        ],
+        cwd=CONFIGS.parent,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    counts = [
+        json.loads((sweep / str(i) / "results.json").read_text())["stages"]["hybrid"]["network_parameters"]
+        for i in range(2)
+    ]
+    assert counts == [2 * 2 + 2 + 2 + 1, 3 * 2 + 3 + 3 + 1]
+
+
+def test_checkpoint_from_another_basis_is_refused(tmp_path):
+    path = tmp_path / "checkpoint.pt"
+    checkpoint.save_checkpoint(path, {"step": torch.tensor(1)}, {"seed": 0}, "a" * 64)
+    with pytest.raises(checkpoint.CheckpointError, match="PGD basis aaaaaaaaaaaaaaaa"):
+        checkpoint.load_checkpoint(path, {"seed": 0}, "b" * 64)
+    assert checkpoint.load_checkpoint(path, {"seed": 0, "ckpt_path": "x"}, "a" * 64)["step"] == 1
