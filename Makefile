@@ -3,7 +3,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup test bench lint demo
+.PHONY: setup test bench discover-bench lint demo
 
 $(STAMP): pyproject.toml
 	python3 -m venv $(VENV)
@@ -19,7 +19,11 @@ test: $(STAMP)
 	$(PY) -m pytest -q
 
 bench: $(STAMP)
+	$(PY) -m bench.train_bench
 	$(PY) bench/pgd_bench.py
+
+discover-bench: $(STAMP)
+	$(PY) -m bench.discover_bench
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check ptwin tests bench train.py

@@ -17,6 +17,8 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import hydra
@@ -25,14 +27,14 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 from torch.utils.tensorboard import SummaryWriter
 
-from ptwin.data.recordings import RecordingError, load_recordings
+from ptwin.data.recordings import RecordingError, RecordingSet, load_recordings
 from ptwin.diagnosis.diagnose import DiagnosisSettings, diagnose
 from ptwin.fitting import checkpoint
 from ptwin.fitting.hybrid import ErrorNetwork, HybridTwin
 from ptwin.fitting.hybrid_training import HybridSettings, rmse_of, train_hybrid
 from ptwin.fitting.physics_fit import fit_physics, rmse
 from ptwin.fitting.pointwise import apparent_permeability
-from ptwin.fitting.split import split_samples
+from ptwin.fitting.split import Split, split_samples
 from ptwin.pgd.basis import Basis
 from ptwin.pgd.cache import cached_basis
 from ptwin.pgd.config import PGDConfig
@@ -59,11 +61,21 @@ def per_curve_fits(make_model, samples, index, terms, iterations, free_terms=Tru
     return fits
 
 
-def train(cfg: DictConfig, output_dir: Path) -> dict:
-    """Run the chain for ``cfg`` and leave its results in ``output_dir``."""
-    started = time.perf_counter()
-    torch.manual_seed(cfg.seed)
-    output_dir.mkdir(parents=True, exist_ok=True)
+@dataclass
+class Setup:
+    """What every stage needs, built from the config: data, basis, split and model factories."""
+
+    recordings: RecordingSet
+    curves: list
+    basis: Basis
+    samples: Samples
+    split: Split
+    make_model: Callable[..., ForceModel]  # (terms=(), values=None, permeability=cfg.permeability)
+    make_twin: Callable[[float, float], HybridTwin]  # (permeability, force scale [N])
+
+
+def prepare(cfg: DictConfig) -> Setup:
+    """Load and check the recordings, print their kinematics, get the cached basis, split."""
     recordings = load_recordings(cfg.data.path)
     meta = recordings.meta
     curves = curve_kinematics(recordings, smoothing=cfg.data.smoothing)
@@ -77,6 +89,7 @@ def train(cfg: DictConfig, output_dir: Path) -> dict:
     reference = next(c for c in curves if c.curve == meta.reference_curve)
     samples = Samples.from_curves([c for c in curves if c is not reference]).to(cfg.device)
     rho, thickness = meta.probe_radius, meta.sample_thickness
+    split = split_samples(samples, tuple(cfg.split.fractions), cfg.split.mode, cfg.split.held_out_curve, cfg.seed)
 
     def make_model(terms=(), values=None, permeability=cfg.permeability):
         fluid = FluidForce(basis, permeability, meta.fluid_viscosity)
@@ -84,7 +97,31 @@ def train(cfg: DictConfig, output_dir: Path) -> dict:
         model = ForceModel(elastic, fluid, rho, thickness, terms, values, cfg.model.self_consistent)
         return model.to(cfg.device)
 
-    split = split_samples(samples, tuple(cfg.split.fractions), cfg.split.mode, cfg.split.held_out_curve, cfg.seed)
+    def make_twin(permeability, force_scale):
+        m = cfg.model
+        generator = torch.Generator().manual_seed(cfg.seed)
+        network = ErrorNetwork(m.inputs, m.hidden, m.activation, samples, split.train, force_scale, generator)
+        return HybridTwin(make_model(permeability=permeability), network.to(cfg.device))
+
+    return Setup(recordings, curves, basis, samples, split, make_model, make_twin)
+
+
+def train(cfg: DictConfig, output_dir: Path) -> dict:
+    """Run the chain for ``cfg`` and leave its results in ``output_dir``."""
+    started = time.perf_counter()
+    torch.manual_seed(cfg.seed)
+    output_dir.mkdir(parents=True, exist_ok=True)
+    setup = prepare(cfg)
+    recordings, basis, samples, split, make_model = (
+        setup.recordings,
+        setup.basis,
+        setup.samples,
+        setup.split,
+        setup.make_model,
+    )
+    meta = recordings.meta
+    rho, thickness = meta.probe_radius, meta.sample_thickness
+    reference = next(c for c in setup.curves if c.curve == meta.reference_curve)
     iterations = cfg.optim.physics_fit.iterations
     writer = SummaryWriter(output_dir / "tensorboard")
     results = {"recordings": str(recordings.path), "basis_hash": basis.config_hash, "stages": {}}
@@ -105,8 +142,12 @@ def train(cfg: DictConfig, output_dir: Path) -> dict:
     print("stage 1: global K (elastic + Darcy) and the pointwise apparent K(w)")
     base = fit_physics(make_model(), samples, split.train, iterations)
     stage_record("elastic_darcy", base)
+    fluid_in_law = base.model.fluid if cfg.model.self_consistent else None
+    consistent_law = ReferenceElasticLaw(
+        reference, rho, thickness, fluid_in_law, cfg.model.elastic_nodes, cfg.data.smoothing
+    )
     apparent = apparent_permeability(
-        base.model.elastic,
+        consistent_law,
         base.model.fluid,
         samples,
         rho,
@@ -144,16 +185,7 @@ def train(cfg: DictConfig, output_dir: Path) -> dict:
     noise = samples.noise_floor[split.train].mean().item()
 
     def make_twin():
-        network = ErrorNetwork(
-            cfg.model.inputs,
-            cfg.model.hidden,
-            cfg.model.activation,
-            samples,
-            split.train,
-            noise,
-            torch.Generator().manual_seed(cfg.seed),
-        ).to(cfg.device)
-        return HybridTwin(make_model(permeability=base.permeability), network)
+        return setup.make_twin(base.permeability, noise)
 
     hybrid_cfg = cfg.optim.hybrid
     settings = HybridSettings(**OmegaConf.to_container(hybrid_cfg, resolve=True))

@@ -18,7 +18,7 @@ from pathlib import Path
 import yaml
 
 from ptwin.data.recordings import write_recordings
-from ptwin.data.simulator import TERMS, Experiment, simulate
+from ptwin.data.simulator import EFFECTS, Experiment, simulate
 
 
 def parse_effects(items: list[str]) -> dict[str, dict[str, float]]:
@@ -26,8 +26,8 @@ def parse_effects(items: list[str]) -> dict[str, dict[str, float]]:
     for item in items:
         term, _, assignment = item.partition(":")
         name, _, value = assignment.partition("=")
-        if term not in TERMS or not name or not value:
-            raise SystemExit(f"--effect {item!r}: write TERM:PARAM=VALUE with TERM one of {', '.join(TERMS)}")
+        if term not in EFFECTS or not name or not value:
+            raise SystemExit(f"--effect {item!r}: write TERM:PARAM=VALUE with TERM one of {', '.join(EFFECTS)}")
         try:
             effects.setdefault(term, {})[name] = float(value)
         except ValueError:

@@ -40,6 +40,10 @@ TERMS = {
     "cantilever_drag": ("b",),
     "contact_offset": ("delta",),
 }
+# Effects the vocabulary does not know, for benchmarks of the diagnosis's honesty:
+# force_drift is an instrument drift of the recorded force, rate·t [N/s].
+OUTSIDE_VOCABULARY = {"force_drift": ("rate",)}
+EFFECTS = {**TERMS, **OUTSIDE_VOCABULARY}
 
 
 @dataclass
@@ -64,9 +68,9 @@ class Experiment:
 
     def __post_init__(self):
         for term, params in self.effects.items():
-            if term not in TERMS:
-                raise ValueError(f"effects: unknown term {term!r}; the vocabulary is {', '.join(TERMS)}")
-            missing = set(TERMS[term]) - set(params)
+            if term not in EFFECTS:
+                raise ValueError(f"effects: unknown term {term!r}; known effects: {', '.join(EFFECTS)}")
+            missing = set(EFFECTS[term]) - set(params)
             if missing:
                 raise ValueError(f"effects.{term}: missing parameter(s) {', '.join(sorted(missing))}")
 
@@ -165,7 +169,8 @@ def simulate_curve(experiment: Experiment, speed: float) -> CurveSimulation:
     depth[after] = solution.y[0]
     residual = np.zeros_like(time)
     residual[after] = [rates(t, y, balance=True) for t, y in zip(solution.t, solution.y.T)]
-    return CurveSimulation(time, z_true + delta, k * (z_true - depth), depth, residual)
+    drift = e.param("force_drift", "rate") * time
+    return CurveSimulation(time, z_true + delta, k * (z_true - depth) + drift, depth, residual)
 
 
 def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:

@@ -1,0 +1,81 @@
+"""make bench (part): warm `python train.py` on the demo, and LM against Adam on the hybrid cost.
+
+Prints the wall time of the whole default run with the PGD basis cached (goal ≤ 30 s on
+2 cores), then trains the default hybrid twin (λ = 1e-2) by LM and by Adam from the same
+start and prints the iterations each needs to come within 1% of LM's final cost.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+from hydra import compose, initialize_config_dir
+
+import train as train_script
+from ptwin.fitting.hybrid import hybrid_residual, newton_permeability
+from ptwin.fitting.lm import LevenbergMarquardt
+from ptwin.fitting.physics_fit import fit_physics
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def warm_run_seconds() -> float:
+    subprocess.run([sys.executable, "-m", "ptwin.pgd", "--help"], cwd=ROOT, capture_output=True)  # warm imports
+    with tempfile.TemporaryDirectory() as out:
+        started = time.perf_counter()
+        subprocess.run([sys.executable, "train.py", f"hydra.run.dir={out}"], cwd=ROOT, check=True, capture_output=True)
+        return time.perf_counter() - started
+
+
+def lm_against_adam(regularisation: float = 1e-2, adam_steps: int = 5000) -> None:
+    cache = os.environ.get("PTWIN_CACHE", str(ROOT / ".cache" / "ptwin"))
+    with initialize_config_dir(config_dir=str(ROOT / "configs"), version_base="1.3"):
+        cfg = compose(config_name="train", overrides=[f"data.path={ROOT / 'data' / 'demo'}", f"cache_dir={cache}"])
+    setup = train_script.prepare(cfg)
+    train = setup.split.train
+    base = fit_physics(setup.make_model(), setup.samples, train)
+    noise = setup.samples.noise_floor[train].mean().item()
+
+    def fresh():
+        twin = setup.make_twin(base.permeability, noise)
+        newton_permeability(twin, setup.samples, train, regularisation)
+        groups = twin.parameter_groups()
+        return hybrid_residual(twin, setup.samples, train, regularisation, groups["physics"] + groups["network"])
+
+    vector, residual = fresh()
+    solver = LevenbergMarquardt(residual, vector.get())
+    costs = []
+    started = time.perf_counter()
+    solver.run(200, tolerance=1e-12, callback=lambda step: costs.append(step.cost))
+    lm_seconds = time.perf_counter() - started
+    target = 1.01 * costs[-1]
+    lm_iterations = next(i + 1 for i, c in enumerate(costs) if c <= target)
+
+    vector, residual = fresh()
+    theta = vector.get().requires_grad_(True)
+    optimiser = torch.optim.Adam([theta], lr=1e-2)
+    adam_iterations, started = None, time.perf_counter()
+    for step in range(1, adam_steps + 1):
+        optimiser.zero_grad()
+        cost = 0.5 * residual(theta).square().sum()
+        if cost.item() <= target:
+            adam_iterations = step
+            break
+        cost.backward()
+        optimiser.step()
+    adam_seconds = time.perf_counter() - started
+    reached = f"{adam_iterations}" if adam_iterations else f"not within {adam_steps} (cost {cost.item():.4g})"
+    print(f"hybrid cost to within 1% of LM's final {costs[-1]:.4g} (λ = {regularisation:g}, 26 parameters):")
+    print(f"  Levenberg–Marquardt: {lm_iterations} iterations ({lm_seconds:.1f} s for {len(costs)})")
+    print(f"  Adam (lr 1e-2):      {reached} iterations ({adam_seconds:.1f} s)")
+
+
+if __name__ == "__main__":
+    print(f"warm `python train.py` on the demo: {warm_run_seconds():.1f} s (goal ≤ 30 s)")
+    lm_against_adam()
