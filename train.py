@@ -26,6 +26,7 @@ import torch
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 from torch.utils.tensorboard import SummaryWriter
+from tqdm import tqdm
 
 from ptwin.data.recordings import RecordingError, RecordingSet, load_recordings
 from ptwin.diagnosis.diagnose import DiagnosisSettings, diagnose
@@ -191,8 +192,12 @@ def train(cfg: DictConfig, output_dir: Path) -> dict:
     settings = HybridSettings(**OmegaConf.to_container(hybrid_cfg, resolve=True))
     n_train = split.train.numel()
 
+    bar = tqdm(total=len(settings.regularisations) * settings.iterations, desc="hybrid LM", unit="step")
+
     def on_step(lambda_index, regularisation, step, twin, solver):
         global_step = lambda_index * settings.iterations + step.iteration
+        bar.update(global_step - bar.n)
+        bar.set_postfix(λ=f"{regularisation:g}", cost=f"{step.cost:.4g}")
         groups = twin.parameter_groups()
         names = groups["physics"] + groups["network"]
         writer.add_scalar("loss/train", 2 * step.cost / n_train, global_step)
@@ -210,6 +215,7 @@ def train(cfg: DictConfig, output_dir: Path) -> dict:
         checkpoint.save_checkpoint(ckpt_file, state, config, basis.config_hash)
 
     outcome = train_hybrid(make_twin, samples, split.train, split.val, settings, on_step, save, resume)
+    bar.close()
     twin = outcome.twin
     hybrid_record = {
         "permeability": twin.physics.fluid.permeability.item(),

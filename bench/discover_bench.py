@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import tempfile
 import time
 import warnings
@@ -57,7 +58,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as scratch:
         for name, effects, geometry in cases:
             experiment = Experiment(samples=args.samples, effects=effects, **geometry)
-            folder = Path(scratch) / name.replace(" ", "_")
+            folder = Path(scratch) / re.sub(r"[^A-Za-z0-9]+", "_", name)
             write_recordings(folder, *simulate(experiment))
             with initialize_config_dir(config_dir=str(ROOT / "configs"), version_base="1.3"):
                 cfg = compose(

@@ -3,7 +3,8 @@
 Every run starts from the same state (K from the regularised Newton, the network's
 seeded initialisation), so runs are independent and a resumed run repeats exactly what
 an uninterrupted one does. ``save`` receives a plain-dict state every
-``checkpoint_every`` steps and after each λ; ``resume`` takes such a state back.
+``checkpoint_every`` steps and after each λ; ``resume`` takes such a state back (one
+saved after the last λ resumes to the finished twin without training).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass, field
 import torch
 
 from ptwin.fitting.hybrid import HybridTwin, hybrid_residual, newton_permeability
-from ptwin.fitting.lm import LevenbergMarquardt, Step
+from ptwin.fitting.lm import LevenbergMarquardt, ParameterVector, Step
 from ptwin.physics.samples import Samples
 
 
@@ -63,17 +64,18 @@ def train_hybrid(
     start = {n: p.detach().clone() for n, p in twin.named_parameters()}
     groups = twin.parameter_groups()
     names = groups["physics"] + groups["network"]
+    vector = ParameterVector(twin, names)
     for index in range(progress["lambda_index"], len(settings.regularisations)):
         regularisation = settings.regularisations[index]
         twin.load_state_dict(start, strict=False)
-        vector, residual = hybrid_residual(twin, samples, train, regularisation, names)
+        _, residual = hybrid_residual(twin, samples, train, regularisation, names)
         rates = {n: settings.learning_rate[g] for g, members in groups.items() for n in members}
         solver = LevenbergMarquardt(residual, vector.get(), vector.expand(rates), settings.damping)
         if progress["run"] is not None:
             solver.state = {k: v.clone() for k, v in progress["run"].items()}
         progress["lambda_index"] = index
 
-        def callback(step: Step, regularisation=regularisation, solver=solver, vector=vector):
+        def callback(step: Step, regularisation=regularisation, solver=solver):
             vector.set(solver.theta)
             if on_step is not None:
                 on_step(progress["lambda_index"], regularisation, step, twin, solver)
