@@ -12,6 +12,8 @@ from ptwin.physics.fluid_force import FluidForce
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
+RELAXATION_PASSES = 6
+
 
 def smooth_contact_radius(depth: torch.Tensor, probe_radius: float) -> torch.Tensor:
     """R = sqrt(ρ² − (ρ − w)²), 0 for w ≤ 0, with finite gradients at w = 0 [m]."""
@@ -28,8 +30,8 @@ class ForceModel(nn.Module):
     ``terms`` names vocabulary terms (``ptwin.physics.terms``); ``values`` their starting
     parameters ({term: {param: value}}). Self-consistent (default): the elastic law is the
     reference curve minus this model's own rate-dependent forces there (F_D and every
-    term), evaluated at its depth nodes; the solid relaxation there takes one fixed-point
-    pass (its input is the elastic force it corrects). K is ``fluid.log_permeability``.
+    term), evaluated at its depth nodes; the solid relaxation there takes a few fixed-point
+    passes (its input is the elastic force it corrects). K is ``fluid.log_permeability``.
     """
 
     def __init__(
@@ -89,9 +91,13 @@ class ForceModel(nn.Module):
         if not self.self_consistent:
             return reference
         nodes = self.elastic.node_samples()
-        elastic = reference - sum(self.rate_forces(nodes, None).values())
+        unrelaxed = reference - sum(self.rate_forces(nodes, None).values())
+        elastic = unrelaxed
         if "solid_relaxation" in self.terms:
-            elastic = reference - sum(self.rate_forces(nodes, elastic).values())
+            # F_el + g·relax(F_el) = unrelaxed: a contraction (rate ≤ g), so a few passes leave O(g⁶).
+            relaxation = self.terms["solid_relaxation"]
+            for _ in range(RELAXATION_PASSES):
+                elastic = unrelaxed - relaxation.force(nodes, None, elastic)
         return elastic
 
     def components(self, samples: Samples) -> dict[str, torch.Tensor]:
