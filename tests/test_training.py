@@ -70,6 +70,11 @@ def test_same_seed_same_result_and_a_killed_run_resumes_to_it(tmp_path, coarse_c
     ckpt = tmp_path / "c" / "checkpoint.pt"
     resumed = run(folder, coarse_cache, tmp_path / "d", *quick(f"ckpt_path={ckpt}"))["results"]["stages"]["hybrid"]
     assert resumed == first
+    finished = tmp_path / "a" / "checkpoint.pt"  # a finished run: the twin is restored, not trained again
+    assert (
+        run(folder, coarse_cache, tmp_path / "f", *quick(f"ckpt_path={finished}"))["results"]["stages"]["hybrid"]
+        == first
+    )
 
     with pytest.raises(checkpoint.CheckpointError, match="model.hidden: checkpoint 6, now 4"):
         run(folder, coarse_cache, tmp_path / "e", *quick(f"ckpt_path={ckpt}", "model.hidden=4"))
