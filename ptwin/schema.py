@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 from hydra.core.config_store import ConfigStore
 
+from ptwin.fitting.hybrid_training import HybridSettings
 from ptwin.pgd.config import PGDConfig
 
 
@@ -37,22 +38,10 @@ class PhysicsFitConfig:
 
 
 @dataclass
-class HybridConfig:
-    regularisations: list[float] = field(default_factory=lambda: [1.0e-4, 1.0e-2, 1.0])
-    iterations: int = 60
-    damping: float = 1.0e-3
-    tolerance: float = 1.0e-10
-    learning_rate: dict[str, float] = field(default_factory=lambda: {"physics": 0.5, "network": 1.0})
-    newton_c1: float = 1.0
-    newton_iterations: int = 30
-    checkpoint_every: int = 10
-
-
-@dataclass
 class OptimConfig:
     pointwise: PointwiseConfig = field(default_factory=PointwiseConfig)
     physics_fit: PhysicsFitConfig = field(default_factory=PhysicsFitConfig)
-    hybrid: HybridConfig = field(default_factory=HybridConfig)
+    hybrid: HybridSettings = field(default_factory=HybridSettings)
 
 
 @dataclass

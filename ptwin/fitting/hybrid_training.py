@@ -21,7 +21,7 @@ from ptwin.physics.samples import Samples
 
 @dataclass
 class HybridSettings:
-    regularisations: list[float]  # the λ grid
+    regularisations: list[float] = field(default_factory=lambda: [1.0e-4, 1.0e-2, 1.0])  # the λ grid
     iterations: int = 60
     damping: float = 1.0e-3
     tolerance: float = 1.0e-10
