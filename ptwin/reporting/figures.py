@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -83,6 +84,7 @@ def save_figures(
         )
     ax.axhline(base.permeability, color="grey", ls="--", lw=1, label="global K, base model")
     ax.set_xscale("log")
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("base speed [µm/s]")
     ax.set_ylabel("K [m²]")
     ax.set_title(f"K against speed: slope {apparent.slope:.2g} ± {apparent.slope_std:.1g} m²/decade")
@@ -149,7 +151,7 @@ def _residual_map(ax, samples, index, residual, title, bins=24):
         rows.append([scaled[which == b].mean() if np.any(which == b) else np.nan for b in range(bins)])
     image = ax.imshow(np.array(rows), aspect="auto", cmap="RdBu_r", vmin=-10, vmax=10)
     ax.set_yticks(range(len(samples.curve_ids)), samples.curve_ids)
-    ax.set_xlabel(f"depth bin (of {bins}, each curve to its deepest point)")
+    ax.set_xlabel(f"depth bin (of {bins}, to the deepest point)")
     ax.set_title(title)
     return image
 
