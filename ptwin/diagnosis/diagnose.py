@@ -12,6 +12,7 @@ import torch
 from ptwin.diagnosis.locate import Mismatch, locate
 from ptwin.diagnosis.name import SIGNATURES, Candidate, choose, confounded, fit_candidates, rejected
 from ptwin.fitting.hybrid import HybridTwin
+from ptwin.fitting.hybrid_training import rmse_of
 from ptwin.fitting.physics_fit import rmse
 from ptwin.fitting.pointwise import ApparentPermeability
 from ptwin.fitting.split import Split
@@ -55,7 +56,7 @@ class Diagnosis:
 
     @property
     def corrected(self) -> Candidate:
-        return self.candidates[self.chosen] if not self.unexplained else self.base
+        return self.candidates[self.chosen]
 
     def to_json(self) -> dict:
         """``diagnosis.json`` as shared/physics-terms.md specifies (plus the confounded pairs)."""
@@ -130,14 +131,12 @@ def diagnose(
         return rmse(candidate.fit.model, samples, split.test)
 
     with torch.no_grad():
-        hybrid_val = (hybrid.predict(samples)[split.val] - samples.force[split.val]).square().mean().sqrt().item()
-        hybrid_test = (hybrid.predict(samples)[split.test] - samples.force[split.test]).square().mean().sqrt().item()
         learned = hybrid.network(samples)[seen]
         named = corrected.fit.model(samples)[seen] - base.fit.model(samples)[seen]
     fit = {
         "base": {"val_rmse": base.val_rmse, "test_rmse": test_rmse(base)},
         "corrected": {"val_rmse": corrected.val_rmse, "test_rmse": test_rmse(corrected)},
-        "hybrid": {"val_rmse": hybrid_val, "test_rmse": hybrid_test},
+        "hybrid": {"val_rmse": rmse_of(hybrid, samples, split.val), "test_rmse": rmse_of(hybrid, samples, split.test)},
     }
     witness = _explained_fraction(learned, named)
 

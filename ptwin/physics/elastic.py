@@ -88,12 +88,15 @@ class ReferenceElasticLaw(nn.Module):
             curve_ids=("reference",),
         )
 
-    def node_forces(self, permeability: torch.Tensor | None = None) -> torch.Tensor:
-        """F_el at the depth nodes for K = ``permeability`` (default: the fluid layer's)."""
+    def node_forces(self, permeability: torch.Tensor | None = None, nodes: torch.Tensor | None = None):
+        """F_el at the depth nodes (or those indexed by ``nodes``) for K = ``permeability`` (default: the
+        fluid layer's; one K, or one per indexed node)."""
+        pick = slice(None) if nodes is None else nodes
         if self.fluid is None:
-            return self.reference_force
+            return self.reference_force[pick]
         k = self.fluid.permeability if permeability is None else permeability
-        return self.reference_force - self.fluid.evaluate(self.velocity, self.radius, self.height, k)
+        fluid = self.fluid.evaluate(self.velocity[pick], self.radius[pick], self.height[pick], k)
+        return self.reference_force[pick] - fluid
 
     def bracket(self, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(index of the node below, fraction of the way to the next) for each depth."""
@@ -112,9 +115,4 @@ class ReferenceElasticLaw(nn.Module):
         if permeability is None or permeability.numel() == 1 or self.fluid is None:
             return self.interpolate(self.node_forces(permeability), depth)
         index, t = self.bracket(depth)
-
-        def at(nodes):
-            fluid = self.fluid.evaluate(self.velocity[nodes], self.radius[nodes], self.height[nodes], permeability)
-            return self.reference_force[nodes] - fluid
-
-        return at(index) * (1 - t) + at(index + 1) * t
+        return self.node_forces(permeability, index) * (1 - t) + self.node_forces(permeability, index + 1) * t

@@ -25,6 +25,7 @@ class Term(nn.Module):
 
     name: ClassVar[str]
     PARAMS: ClassVar[dict[str, tuple[str, float]]]
+    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ()  # parameters physical only when ≥ 0
     STARTS: ClassVar[list[dict[str, float]]] = [{}]  # initial values tried by a fit
 
     def __init__(self, probe_radius: float, **values: float):
@@ -55,7 +56,8 @@ class Term(nn.Module):
 
     def violation(self) -> str | None:
         """Why the fitted values are not physical, or None."""
-        return None
+        negative = [f"{name} < 0" for name in self.NON_NEGATIVE if self.value(name) < 0]
+        return "; ".join(negative) or None
 
     def depth_shift(self) -> torch.Tensor | None:
         return None
@@ -75,9 +77,7 @@ class SolidViscosity(Term):
 
     name = "solid_viscosity"
     PARAMS = {"gamma": ("linear", 0.0)}
-
-    def violation(self):
-        return "gamma < 0" if self.value("gamma") < 0 else None
+    NON_NEGATIVE = ("gamma",)
 
     def force(self, samples, radius, elastic):
         return math.pi * self.value("gamma") * radius * samples.velocity
@@ -88,10 +88,8 @@ class SolidRelaxation(Term):
 
     name = "solid_relaxation"
     PARAMS = {"g": ("linear", 0.1), "tau": ("log", 1.0)}
+    NON_NEGATIVE = ("g",)
     STARTS = [{"tau": tau} for tau in (1e-2, 1e-1, 1.0, 10.0)]
-
-    def violation(self):
-        return "g < 0" if self.value("g") < 0 else None
 
     def force(self, samples, radius, elastic):
         tau = self.value("tau").expand_as(elastic)
@@ -115,9 +113,7 @@ class StrainDependentPermeability(Term):
 
     name = "strain_dependent_permeability"
     PARAMS = {"m": ("linear", 0.0)}
-
-    def violation(self):
-        return "m < 0" if self.value("m") < 0 else None
+    NON_NEGATIVE = ("m",)
 
     def permeability_factor(self, depth):
         return torch.exp(-self.value("m") * depth.clamp(min=0.0) / self.probe_radius)
@@ -128,9 +124,7 @@ class CantileverDrag(Term):
 
     name = "cantilever_drag"
     PARAMS = {"b": ("linear", 0.0)}
-
-    def violation(self):
-        return "b < 0" if self.value("b") < 0 else None
+    NON_NEGATIVE = ("b",)
 
     def force(self, samples, radius, elastic):
         return self.value("b") * samples.base_speed
