@@ -41,7 +41,7 @@ from ptwin.pgd.cache import cached_basis
 from ptwin.pgd.config import PGDConfig
 from ptwin.physics.elastic import ReferenceElasticLaw
 from ptwin.physics.fluid_force import FluidForce
-from ptwin.physics.kinematics import curve_kinematics
+from ptwin.physics.kinematics import CurveKinematics, curve_kinematics
 from ptwin.physics.model import ForceModel
 from ptwin.physics.samples import Samples
 from ptwin.reporting.figures import save_figures
@@ -67,7 +67,7 @@ class Setup:
     """What every stage needs, built from the config: data, basis, split and model factories."""
 
     recordings: RecordingSet
-    curves: list
+    reference: CurveKinematics  # the reference (slowest) curve: its F(w) is the elastic law
     basis: Basis
     samples: Samples
     split: Split
@@ -104,7 +104,7 @@ def prepare(cfg: DictConfig) -> Setup:
         network = ErrorNetwork(m.inputs, m.hidden, m.activation, samples, split.train, force_scale, generator)
         return HybridTwin(make_model(permeability=permeability), network.to(cfg.device))
 
-    return Setup(recordings, curves, basis, samples, split, make_model, make_twin)
+    return Setup(recordings, reference, basis, samples, split, make_model, make_twin)
 
 
 def train(cfg: DictConfig, output_dir: Path) -> dict:
@@ -122,7 +122,7 @@ def train(cfg: DictConfig, output_dir: Path) -> dict:
     )
     meta = recordings.meta
     rho, thickness = meta.probe_radius, meta.sample_thickness
-    reference = next(c for c in setup.curves if c.curve == meta.reference_curve)
+    reference = setup.reference
     iterations = cfg.optim.physics_fit.iterations
     writer = SummaryWriter(output_dir / "tensorboard")
     results = {"recordings": str(recordings.path), "basis_hash": basis.config_hash, "stages": {}}
@@ -238,7 +238,7 @@ def train(cfg: DictConfig, output_dir: Path) -> dict:
         dcfg = OmegaConf.to_container(cfg.diagnosis, resolve=True)
         dcfg.pop("enabled")
         diagnosis = diagnose(
-            make_model, samples, split, twin, apparent, DiagnosisSettings(**dcfg, iterations=iterations)
+            make_model, samples, split, twin, apparent, DiagnosisSettings(**dcfg, iterations=iterations), base_fit=base
         )
         payload = diagnosis.to_json()
     else:

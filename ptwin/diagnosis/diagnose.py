@@ -13,7 +13,7 @@ from ptwin.diagnosis.locate import Mismatch, locate
 from ptwin.diagnosis.name import SIGNATURES, Candidate, choose, confounded, fit_candidates, rejected
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import rmse_of
-from ptwin.fitting.physics_fit import rmse
+from ptwin.fitting.physics_fit import PhysicsFit, rmse
 from ptwin.fitting.pointwise import ApparentPermeability
 from ptwin.fitting.split import Split
 from ptwin.physics.samples import Samples
@@ -103,14 +103,25 @@ def diagnose(
     apparent: ApparentPermeability,
     settings: DiagnosisSettings,
     progress: Callable[[str], None] = print,
+    base_fit: PhysicsFit | None = None,
 ) -> Diagnosis:
-    """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them)."""
+    """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); ``base_fit``: the base
+    model already fitted on ``split.train`` with ``settings.iterations``, if there is one."""
     s = settings
     seen = torch.cat([split.train, split.val]).sort().values
     noise_floor = samples.noise_floor[seen].mean().item()
     progress("diagnosis: fitting the base model and the candidate terms (K refitted with each)")
     candidates = fit_candidates(
-        make_model, samples, split, s.terms, s.max_terms, s.iterations, s.block, s.whiteness_threshold, progress
+        make_model,
+        samples,
+        split,
+        s.terms,
+        s.max_terms,
+        s.iterations,
+        s.block,
+        s.whiteness_threshold,
+        progress,
+        {(): base_fit} if base_fit is not None else None,
     )
     base = candidates[()]
     with torch.no_grad():

@@ -54,13 +54,18 @@ def fit_candidates(
     block: int,
     threshold: float,
     progress: Callable[[str], None] = print,
+    fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
 ) -> dict[tuple[str, ...], Candidate]:
-    """Fits of the base model, every single term and (when needed) every pair, on the train split."""
+    """Fits of the base model, every single term and (when needed) every pair, on the train split.
+
+    ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are.
+    """
+    fitted = fitted or {}
     seen = torch.cat([split.train, split.val]).sort().values
     candidates = {}
 
     def add(subset):
-        fit = fit_with_starts(make_model, subset, samples, split.train, iterations)
+        fit = fitted.get(subset) or fit_with_starts(make_model, subset, samples, split.train, iterations)
         with torch.no_grad():
             residual = fit.model(samples)[seen] - samples.force[seen]
         structure = pooled_whiteness(samples, residual, seen, block)

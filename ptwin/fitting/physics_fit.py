@@ -113,6 +113,8 @@ def fit_with_starts(make_model, terms: tuple[str, ...], samples: Samples, index:
     ``make_model(terms, values)`` builds a fresh ``ForceModel``.
     """
     starts = [dict(zip(terms, combo)) for combo in itertools.product(*(VOCABULARY[t].STARTS for t in terms))]
+    if len(starts) == 1:
+        return fit_physics(make_model(terms, starts[0]), samples, index, iterations)
     best, best_cost = None, math.inf
     for values in starts:
         model = make_model(terms, values)
