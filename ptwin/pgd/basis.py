@@ -49,6 +49,7 @@ class Basis:
             "thickness_nodes": torch.from_numpy(problem.thickness_nodes),
             "amplitudes": solution.amplitudes,
             **{f"factors_{name}": f for name, f in zip(solution.names, solution.factors)},
+            "factors_plane": problem.plane_modes @ solution.factors[0],  # nodal values
         }
         stats = {**stats, "history": solution.history}
         return cls(config, force, grids, field, stats)

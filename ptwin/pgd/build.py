@@ -32,7 +32,7 @@ def build_basis(config: PGDConfig, progress: Callable[[str], None] = print) -> B
             f"{problem.dims[1].size} thickness nodes ({rings} rings)"
         )
         solution = enrich(problem.dims, problem.n_terms, config.enrichment, progress, _force_at_probes(problem))
-        beta, factors = force_modes(solution, problem.top_integral, problem.dims[4].nodes)
+        beta, factors = force_modes(solution, problem.dims[0].load, problem.dims[4].nodes)
         betas.append(weight * beta)
         parameters.append(factors)
         fine = fine or (problem, solution)
@@ -56,7 +56,7 @@ def _force_at_probes(problem, count: int = 64, seed: int = 0):
 
     def output(factors, amplitudes):
         plane, thickness, *parameters = factors
-        beta = amplitudes * (problem.top_integral @ plane) * thickness[-1]
+        beta = amplitudes * (problem.dims[0].load @ plane) * thickness[-1]
         return (beta * torch.stack([p[i] for p, i in zip(parameters, index)]).prod(dim=0)).sum(dim=1)
 
     return output

@@ -27,7 +27,8 @@ class SeparatedForce:
 
 
 def force_modes(solution: SeparatedSolution, top_integral: torch.Tensor, radius_nodes: torch.Tensor):
-    """(β, parameter factors) of the force of one separated pressure solution."""
+    """(β, parameter factors) of the force of one separated pressure solution;
+    ``top_integral`` (N_plane,) integrates a plane factor over the disc."""
     plane, thickness, *parameters = solution.factors
     beta = solution.amplitudes * (top_integral @ plane) * thickness[-1]
     parameters[2] = parameters[2] * radius_nodes[:, None] ** 2

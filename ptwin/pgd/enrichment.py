@@ -2,8 +2,9 @@
 
 Solves Σ_t ⊗_d A_t^d u = ⊗_d f^d for u = Σ_i α_i ⊗_d F_i^d. Every factor F_i^d is
 kept at unit norm and its scale in α_i: products over six dimensions otherwise span
-1e-100. After each new mode the parameter dimensions get a Galerkin update over all
-modes (cheap: their operators are diagonal), which is what lets greedy PGD converge.
+1e-100. After each new mode every diagonal dimension (the parameters and the in-plane
+eigenbasis) gets a Galerkin update over all modes at once (cheap: its operators are
+diagonal), which is what lets greedy PGD converge.
 """
 
 from __future__ import annotations
@@ -12,12 +13,11 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import scipy.linalg
 import torch
 
-from ptwin.pgd.dimensions import FEDimension, ParameterDimension
+from ptwin.pgd.dimensions import BandedDimension, DiagonalDimension
 
-Dimension = FEDimension | ParameterDimension
+Dimension = DiagonalDimension | BandedDimension
 
 
 @dataclass
@@ -60,29 +60,37 @@ def enrich(
     probe points), by less than ``output_tol`` relative: the output residual.
     """
     generator = torch.Generator().manual_seed(settings.seed)
-    factors = [torch.zeros(dim.size, 0, dtype=torch.float64) for dim in dims]
-    applied = [[torch.zeros(dim.size, 0, dtype=torch.float64)] * n_terms for dim in dims]
-    amplitudes = torch.zeros(0, dtype=torch.float64)
+    capacity = settings.max_modes
+    # Preallocated to the mode budget, one row per mode so that the first n modes are
+    # contiguous: factors (capacity, N_d), applied A_t F (capacity, T, N_d).
+    rows = [torch.zeros(capacity, dim.size, dtype=torch.float64) for dim in dims]
+    applied_rows = [torch.zeros(capacity, n_terms, dim.size, dtype=torch.float64) for dim in dims]
+    amplitudes = torch.zeros(capacity, dtype=torch.float64)
     history: list[dict] = []
     start = time.perf_counter()
     small_in_a_row = 0
     previous_output = None
-    for mode in range(settings.max_modes):
-        new, amplitude, iterations = _new_mode(dims, n_terms, factors, applied, amplitudes, settings, generator)
-        factors = [torch.cat([f, g[:, None]], dim=1) for f, g in zip(factors, new)]
-        amplitudes = torch.cat([amplitudes, amplitude.reshape(1)])
+    for mode in range(capacity):
+        count = mode + 1
+        known = ([a[:mode].reshape(-1, a.shape[2]) for a in applied_rows], amplitudes[:mode])
+        new, amplitude, iterations = _new_mode(dims, n_terms, *known, settings, generator)
         for d, dim in enumerate(dims):
-            applied[d] = [torch.cat([applied[d][t], dim.apply(t, new[d][:, None])], dim=1) for t in range(n_terms)]
-        amplitudes = _update_parameter_dimensions(dims, n_terms, factors, applied, amplitudes)
-        relative_amplitude = float(amplitude.abs() / amplitudes.abs().max())
+            rows[d][mode] = new[d]
+            applied_rows[d][mode] = dim.apply(new[d][:, None])[:, :, 0]
+        amplitudes[mode] = amplitude
+        # Column views (N_d, n) and (T, N_d, n) of the same storage: updates write through.
+        factors = [r[:count].T for r in rows]
+        applied = [a[:count].permute(1, 2, 0) for a in applied_rows]
+        amplitudes[:count] = _update_diagonal_dimensions(dims, factors, applied, amplitudes[:count])
+        relative_amplitude = float(amplitude.abs() / amplitudes[:count].abs().max())
         change = 1.0
         if output is not None:
-            current = output(factors, amplitudes)
+            value = output(factors, amplitudes[:count])
             if previous_output is not None:
-                change = float(((current - previous_output) / current).abs().max())
-            previous_output = current
+                change = float(((value - previous_output) / value).abs().max())
+            previous_output = value
         entry = {
-            "mode": mode + 1,
+            "mode": count,
             "relative_amplitude": relative_amplitude,
             "output_change": change,
             "iterations": iterations,
@@ -90,7 +98,7 @@ def enrich(
         }
         history.append(entry)
         progress(
-            f"mode {mode + 1:4d}  amplitude {relative_amplitude:.2e}  output change {change:.2e}"
+            f"mode {count:4d}  amplitude {relative_amplitude:.2e}  output change {change:.2e}"
             f"  fixed-point its {iterations:2d}  {entry['seconds']:6.2f} s"
         )
         converged = relative_amplitude < settings.amplitude_tol or change < settings.output_tol
@@ -98,12 +106,24 @@ def enrich(
         if small_in_a_row >= 2:
             break
     progress(f"stopped after {len(history)} modes, last output change {history[-1]['output_change']:.2e}")
-    return SeparatedSolution([dim.name for dim in dims], factors, amplitudes, history)
+    count = len(history)
+    return SeparatedSolution(
+        [dim.name for dim in dims], [r[:count].T.contiguous() for r in rows], amplitudes[:count].clone(), history
+    )
 
 
-def _new_mode(dims, n_terms, factors, applied, amplitudes, settings, generator):
-    """Alternating-directions fixed point for the next rank-one correction."""
+def _others(n_dims: int) -> list[torch.Tensor]:
+    """For each dimension d, the indices of every other dimension."""
+    return [torch.tensor([e for e in range(n_dims) if e != d]) for d in range(n_dims)]
+
+
+def _new_mode(dims, n_terms, applied, amplitudes, settings, generator):
+    """Alternating-directions fixed point for the next rank-one correction.
+
+    ``applied[d]`` (n·T, N_d) holds A_t^d F_i^d for the n known modes, mode-major.
+    """
     n_dims = len(dims)
+    others = _others(n_dims)
     new = []
     for dim in dims:
         start = dim.load + 0.5 * dim.load.abs().max() * torch.rand(dim.size, generator=generator, dtype=torch.float64)
@@ -113,9 +133,8 @@ def _new_mode(dims, n_terms, factors, applied, amplitudes, settings, generator):
     prior = torch.empty(n_terms, n_dims, amplitudes.numel(), dtype=torch.float64)  # F_d^T A_t^d F_i^d
 
     def project(d):
-        for t in range(n_terms):
-            own[t, d] = new[d] @ dims[d].apply(t, new[d][:, None])[:, 0]
-            prior[t, d] = new[d] @ applied[d][t]
+        own[:, d] = dims[d].apply(new[d][:, None])[:, :, 0] @ new[d]
+        prior[:, d] = (applied[d] @ new[d]).reshape(-1, n_terms).T
         loads[d] = new[d] @ dims[d].load
 
     for d in range(n_dims):
@@ -123,11 +142,9 @@ def _new_mode(dims, n_terms, factors, applied, amplitudes, settings, generator):
     for iteration in range(1, settings.max_fixed_point_iterations + 1):  # noqa: B007 (returned)
         previous = [f.clone() for f in new]
         for d in range(n_dims):
-            others = [e for e in range(n_dims) if e != d]
-            coefficients = own[:, others].prod(dim=1)
-            rhs = loads[others].prod() * dims[d].load
-            for t in range(n_terms):
-                rhs = rhs - applied[d][t] @ (amplitudes * prior[t][others].prod(dim=0))
+            coefficients = own[:, others[d]].prod(dim=1)
+            weights = amplitudes * prior[:, others[d]].prod(dim=1)  # (T, n)
+            rhs = loads[others[d]].prod() * dims[d].load - weights.T.reshape(-1) @ applied[d]
             solution = dims[d].solve(coefficients, rhs)
             new[d] = solution / solution.norm()
             project(d)
@@ -139,33 +156,47 @@ def _new_mode(dims, n_terms, factors, applied, amplitudes, settings, generator):
     return new, amplitude, iteration
 
 
-def _update_parameter_dimensions(dims, n_terms, factors, applied, amplitudes):
-    """Galerkin-project each parameter dimension's factors over all modes at once.
+def _update_diagonal_dimensions(dims, factors, applied, amplitudes):
+    """Galerkin-project each diagonal dimension's factors over all modes at once.
 
-    With the other dimensions fixed the system decouples per grid node j into an
-    n×n system (Σ_t c_t(j) B_t) y_j = f(j) h. For two terms it is a matrix pencil:
-    one generalised eigendecomposition serves every node.
+    With the other dimensions fixed the system decouples per node j of dimension d
+    into an n×n system (Σ_t c_t(j) B_t) y_j = f(j) h, B_t the Hadamard product of the
+    other dimensions' Gram matrices. For two terms it is a matrix pencil: one
+    generalised eigendecomposition serves every node. Updates ``factors`` and
+    ``applied`` in place and returns the amplitudes.
     """
-    if n_terms != 2:
+    if len(applied[0]) != 2:
         raise NotImplementedError("the Galerkin update handles two-term operators (the Laplacian's split)")
-    grams = [[factors[e].T @ applied[e][t] for t in range(n_terms)] for e in range(len(dims))]
-    loads = [factors[e].T @ dims[e].load for e in range(len(dims))]
+    others = _others(len(dims))
+    grams = [f.T @ a for f, a in zip(factors, applied)]  # (T, n, n) each
+    loads = [f.T @ dim.load for f, dim in zip(factors, dims)]
     for d, dim in enumerate(dims):
-        if not isinstance(dim, ParameterDimension):
+        if not isinstance(dim, DiagonalDimension):
             continue
-        others = [e for e in range(len(dims)) if e != d]
-        b = [torch.stack([grams[e][t] for e in others]).prod(dim=0) for t in range(n_terms)]
-        h = torch.stack([loads[e] for e in others]).prod(dim=0)
-        total = 0.5 * (b[0] + b[1] + (b[0] + b[1]).T)
-        # b0 + b1 is positive definite even where one term alone is nearly singular.
-        eigenvalues, vectors = scipy.linalg.eigh(0.5 * (b[1] + b[1].T).numpy(), total.numpy())
-        lam, w = torch.from_numpy(eigenvalues), torch.from_numpy(vectors)
+        b = torch.stack([grams[e] for e in others[d].tolist()]).prod(dim=0)
+        h = torch.stack([loads[e] for e in others[d].tolist()]).prod(dim=0)
+        lam, w = _pencil(b[1], b[0] + b[1])
         c0, c1 = dim.term_coefficients
         diagonal = c0[:, None] * (1 - lam)[None, :] + c1[:, None] * lam[None, :]
         y = (dim.load[:, None] * (w.T @ h)[None, :] / diagonal) @ w.T
         amplitudes = y.norm(dim=0)
-        factors[d][:] = y / amplitudes
-        applied[d] = [dim.apply(t, factors[d]) for t in range(n_terms)]
-        grams[d] = [factors[d].T @ applied[d][t] for t in range(n_terms)]
+        # A mode the projection leaves empty keeps its factor, with amplitude zero.
+        factors[d][:] = torch.where(amplitudes > 0, y / amplitudes.clamp_min(1e-300), factors[d])
+        applied[d][:] = dim.apply(factors[d])
+        grams[d] = factors[d].T @ applied[d]
         loads[d] = factors[d].T @ dim.load
     return amplitudes
+
+
+def _pencil(b1: torch.Tensor, total: torch.Tensor, rcond: float = 1e-12):
+    """λ (k,) and W (n, k) with Wᵀ·b1·W = diag(λ), Wᵀ·total·W = I.
+
+    ``total`` (b0 + b1, positive semi-definite) loses rank numerically when modes
+    become nearly dependent; its null space is dropped (a minimum-norm projection)
+    rather than handed to a Cholesky factorisation that would fail or amplify noise.
+    """
+    s, q = torch.linalg.eigh(0.5 * (total + total.T))
+    keep = s > rcond * s[-1]
+    w = q[:, keep] / s[keep].sqrt()
+    lam, z = torch.linalg.eigh(w.T @ (0.5 * (b1 + b1.T)) @ w)
+    return lam.clamp(0.0, 1.0), w @ z

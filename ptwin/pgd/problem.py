@@ -12,10 +12,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 import torch
 
 from ptwin.pgd.config import Grid, PGDConfig
-from ptwin.pgd.dimensions import FEDimension, ParameterDimension
+from ptwin.pgd.dimensions import BandedDimension, DiagonalDimension, ParameterDimension
 from ptwin.pgd.fem import interval_matrices, triangle_matrices
 from ptwin.pgd.mesh import graded_thickness, unit_disc
 
@@ -25,15 +26,19 @@ _ENERGY_WEIGHT = {"velocity": -2.0, "permeability": 1.0, "contact_radius": -3.0,
 
 @dataclass
 class DiscreteProblem:
-    """The separated operator plus what is needed to read forces and fields back."""
+    """The separated operator plus what is needed to read forces and fields back.
+
+    The in-plane dimension lives in the eigenbasis of its pencil: a factor a there is
+    the nodal field ``plane_modes @ a``, and its top integral is ``dims[0].load @ a``.
+    """
 
     dims: list
     n_terms: int
     plane_nodes: np.ndarray  # (N, 2) all in-plane nodes
     plane_free: np.ndarray  # (N,) bool, not on the Dirichlet rim
     plane_triangles: np.ndarray
+    plane_modes: torch.Tensor  # (N_free, N_free) mass-orthonormal eigenvectors
     thickness_nodes: np.ndarray  # (M,)
-    top_integral: torch.Tensor  # (N_free,) ∫_disc of each free in-plane basis function
 
 
 def log_grid(grid: Grid) -> torch.Tensor:
@@ -47,7 +52,7 @@ def _parameter(name: str, grid: Grid, coefficients, load) -> ParameterDimension:
     trapezoid[[0, -1]] *= 0.5
     weight = trapezoid * nodes ** _ENERGY_WEIGHT[name]
     terms = torch.stack([c(nodes) for c in coefficients]) * weight
-    return ParameterDimension(name, nodes, terms, load(nodes) * weight)
+    return ParameterDimension(name, terms, load(nodes) * weight, nodes)
 
 
 def build_problem(config: PGDConfig, rings: int | None = None) -> DiscreteProblem:
@@ -55,21 +60,18 @@ def build_problem(config: PGDConfig, rings: int | None = None) -> DiscreteProble
     nodes, triangles, rim = unit_disc(rings or config.plane.rings, config.plane.ring_density, config.plane.edge_grading)
     stiffness, mass = triangle_matrices(nodes, triangles)
     free = ~rim
-    top_integral = torch.from_numpy(np.asarray(mass[free].sum(axis=1)).ravel())
-    plane = FEDimension(
-        "plane",
-        stiffness[free][:, free],
-        mass[free][:, free],
-        torch.tensor([[1.0, 0.0], [0.0, 1.0]], dtype=torch.float64),  # term 0: ∇ξζ, term 1: ∂φ
-        top_integral,
-        banded=False,
-    )
+    top_integral = np.asarray(mass[free].sum(axis=1)).ravel()  # ∫_disc of each free basis function
+    # S V = M V Λ with VᵀMV = I: term 0 (∇ξζ) is diag(λ), term 1 (∂φ) the identity.
+    eigenvalues, modes = scipy.linalg.eigh(stiffness[free][:, free].toarray(), mass[free][:, free].toarray())
+    coefficients = torch.from_numpy(np.stack([eigenvalues, np.ones_like(eigenvalues)]))
+    plane = DiagonalDimension("plane", coefficients, torch.from_numpy(modes.T @ top_integral))
     phi = graded_thickness(config.thickness.nodes, config.thickness.finest)
     z_stiffness, z_mass = interval_matrices(phi)
     top = torch.zeros(len(phi), dtype=torch.float64)
     top[-1] = 1.0
-    thickness = FEDimension(
-        "thickness", z_stiffness, z_mass, torch.tensor([[0.0, 1.0], [1.0, 0.0]], dtype=torch.float64), top, banded=True
+    # Term 0 (∇ξζ) carries the φ mass, term 1 (∂φ) the φ stiffness.
+    thickness = BandedDimension(
+        "thickness", z_stiffness, z_mass, torch.tensor([[0.0, 1.0], [1.0, 0.0]], dtype=torch.float64), top
     )
     one = torch.ones_like
     velocity = _parameter("velocity", config.velocity, [one, one], lambda u: u)
@@ -81,5 +83,11 @@ def build_problem(config: PGDConfig, rings: int | None = None) -> DiscreteProble
         radius = _parameter("contact_radius", config.contact_radius, [one, lambda r: r**2], lambda r: r**2)
         shape = _parameter("height", config.height, [lambda h: h, lambda h: 1 / h], one)
     return DiscreteProblem(
-        [plane, thickness, velocity, permeability, radius, shape], 2, nodes, free, triangles, phi, top_integral
+        [plane, thickness, velocity, permeability, radius, shape],
+        2,
+        nodes,
+        free,
+        triangles,
+        torch.from_numpy(modes),
+        phi,
     )

@@ -4,17 +4,16 @@
   fluid force on a cylinder of radius R and height H = xR is c(x)·μ·U·R³/K.
 - ``bessel_pressure``: the pressure field as a Bessel series.
 - ``discrete_force_coefficient``: the force of the exact solution of the same
-  discrete problem the PGD solves, by fast diagonalisation (a generalised
-  eigendecomposition of the in-plane pencil, one tridiagonal solve per mode).
+  discrete problem the PGD solves, by fast diagonalisation (one tridiagonal solve
+  per eigenmode of the in-plane pencil).
 """
 
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 import scipy.special
+import torch
 
-from ptwin.pgd.dimensions import solve_tridiagonal
 from ptwin.pgd.problem import DiscreteProblem
 
 _ZEROS = scipy.special.jn_zeros(0, 4000)
@@ -41,30 +40,22 @@ def bessel_pressure(r, z, *, velocity, permeability, contact_radius, height, vis
     return 2 * viscosity * velocity * contact_radius / permeability * series
 
 
-def _plane_modes(problem: DiscreteProblem):
-    plane = problem.dims[0]
-    values, vectors = scipy.linalg.eigh(plane.stiffness.toarray(), plane.mass.toarray())
-    return values, vectors
-
-
-def _thickness_solve(problem, aspect_ratio, eigenvalue, rhs):
-    thickness = problem.dims[1]
-    return solve_tridiagonal(aspect_ratio * eigenvalue * thickness.mass + thickness.stiffness / aspect_ratio, rhs)
-
-
 def discrete_force_coefficient(problem: DiscreteProblem, aspect_ratios) -> np.ndarray:
     """c_h(x): the force coefficient of the discrete problem, for each x.
 
-    Diagonalises the in-plane pencil (the graded φ pencil is far too ill-conditioned
-    for a dense eigensolver), then one tridiagonal solve per in-plane mode.
+    The in-plane dimension is already diagonal (the eigenbasis of its pencil), so the
+    exact discrete solution is one tridiagonal φ solve per in-plane mode λ, with
+    coefficients (x·λ, 1/x), weighted by the squared top integral of that mode.
     """
-    values, vectors = _plane_modes(problem)
-    weights = (vectors.T @ problem.top_integral.numpy()) ** 2
-    top = np.zeros(len(problem.thickness_nodes))
-    top[-1] = 1.0
+    plane, thickness = problem.dims[:2]
+    eigenvalues, weights = plane.term_coefficients[0].tolist(), (plane.load**2).tolist()
+    top = thickness.load
     return np.array(
         [
-            sum(w * _thickness_solve(problem, x, lam, top)[-1] for lam, w in zip(values, weights))
+            sum(
+                w * thickness.solve(torch.tensor([x * lam, 1 / x], dtype=torch.float64), top)[-1].item()
+                for lam, w in zip(eigenvalues, weights)
+            )
             for x in np.atleast_1d(aspect_ratios)
         ]
     )
