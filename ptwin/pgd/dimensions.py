@@ -2,13 +2,13 @@
 
 Every operator term is a tensor product over dimensions, so the greedy solver needs
 from each dimension only: apply every term to factors, solve a weighted sum of its
-term operators, and give its load vector. Two kinds cover the Darcy problem:
+term operators (for one right-hand side, or for its load under many weightings), and
+give its load vector. Two kinds cover the Darcy problem:
 
 - ``DiagonalDimension``: every term operator is diagonal. Parameter grids are
   (coefficient × quadrature weight at each node); the in-plane P1 space becomes one in
   the eigenbasis of its stiffness–mass pencil (fast diagonalisation), where stiffness
-  is diag(λ) and mass the identity. Solves are divisions, and the Galerkin update of
-  all modes at once (``enrichment``) applies to every diagonal dimension.
+  is diag(λ) and mass the identity. Solves are divisions.
 - ``BandedDimension``: the 1-D P1 thickness space, tridiagonal, solved in O(N). Its
   graded mesh (elements from 1e-8 to 0.5) is far too ill-conditioned for a dense
   eigensolver, so it keeps its nodal basis.
@@ -49,6 +49,10 @@ class DiagonalDimension:
     def solve(self, coefficients: torch.Tensor, rhs: torch.Tensor) -> torch.Tensor:
         """Solve (Σ_t coefficients[t]·A_t) f = rhs for one vector f (N,)."""
         return rhs / (coefficients @ self.term_coefficients)
+
+    def solve_each(self, coefficients: torch.Tensor) -> torch.Tensor:
+        """Solve (Σ_t coefficients[i, t]·A_t) z_i = load for each row i: (N, k)."""
+        return self.load[:, None] / (coefficients @ self.term_coefficients).T
 
 
 @dataclass
@@ -96,6 +100,10 @@ class BandedDimension:
         """Solve (Σ_t coefficients[t]·A_t) f = rhs in O(N)."""
         matrix = np.einsum("t,tbn->bn", coefficients.numpy(), self._term_bands.numpy())
         return torch.from_numpy(scipy.linalg.solve_banded((1, 1), matrix, rhs.numpy()))
+
+    def solve_each(self, coefficients: torch.Tensor) -> torch.Tensor:
+        """Solve (Σ_t coefficients[i, t]·A_t) z_i = load for each row i: (N, k)."""
+        return torch.stack([self.solve(c, self.load) for c in coefficients], dim=1)
 
 
 def _bands(matrix: sp.spmatrix) -> np.ndarray:

@@ -2,9 +2,9 @@
 
 Solves Σ_t ⊗_d A_t^d u = ⊗_d f^d for u = Σ_i α_i ⊗_d F_i^d. Every factor F_i^d is
 kept at unit norm and its scale in α_i: products over six dimensions otherwise span
-1e-100. After each new mode every diagonal dimension (the parameters and the in-plane
-eigenbasis) gets a Galerkin update over all modes at once (cheap: its operators are
-diagonal), which is what lets greedy PGD converge.
+1e-100. After each new mode every dimension gets a Galerkin update over all modes at once
+(cheap: one matrix pencil decouples it into one diagonal or banded solve per mode),
+which is what lets greedy PGD converge in few modes.
 """
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ def enrich(
         # Column views (N_d, n) and (T, N_d, n) of the same storage: updates write through.
         factors = [r[:count].T for r in rows]
         applied = [a[:count].permute(1, 2, 0) for a in applied_rows]
-        amplitudes[:count] = _update_diagonal_dimensions(dims, factors, applied, amplitudes[:count])
+        amplitudes[:count] = _update_dimensions(dims, factors, applied, amplitudes[:count])
         relative_amplitude = float(amplitude.abs() / amplitudes[:count].abs().max())
         change = 1.0
         if output is not None:
@@ -156,14 +156,15 @@ def _new_mode(dims, n_terms, applied, amplitudes, settings, generator):
     return new, amplitude, iteration
 
 
-def _update_diagonal_dimensions(dims, factors, applied, amplitudes):
-    """Galerkin-project each diagonal dimension's factors over all modes at once.
+def _update_dimensions(dims, factors, applied, amplitudes):
+    """Galerkin-project each dimension's factors over all modes at once.
 
-    With the other dimensions fixed the system decouples per node j of dimension d
-    into an n×n system (Σ_t c_t(j) B_t) y_j = f(j) h, B_t the Hadamard product of the
-    other dimensions' Gram matrices. For two terms it is a matrix pencil: one
-    generalised eigendecomposition serves every node. Updates ``factors`` and
-    ``applied`` in place and returns the amplitudes.
+    With the other dimensions fixed, dimension d's factors Y (N_d, n) solve
+    Σ_t A_t Y B_t = f hᵀ, B_t the Hadamard product of the other dimensions' Gram
+    matrices. For two terms the pencil (B_1, B_0 + B_1) = W⁻ᵀ(Λ, I)W⁻¹ decouples it
+    into n solves ((1 − λ_i) A_0 + λ_i A_1) z_i = f, Y = Z diag(Wᵀh) Wᵀ: divisions on
+    a diagonal dimension, O(N) banded solves on the thickness. Updates ``factors``
+    and ``applied`` in place and returns the amplitudes.
     """
     if len(applied[0]) != 2:
         raise NotImplementedError("the Galerkin update handles two-term operators (the Laplacian's split)")
@@ -171,14 +172,10 @@ def _update_diagonal_dimensions(dims, factors, applied, amplitudes):
     grams = [f.T @ a for f, a in zip(factors, applied)]  # (T, n, n) each
     loads = [f.T @ dim.load for f, dim in zip(factors, dims)]
     for d, dim in enumerate(dims):
-        if not isinstance(dim, DiagonalDimension):
-            continue
         b = torch.stack([grams[e] for e in others[d].tolist()]).prod(dim=0)
         h = torch.stack([loads[e] for e in others[d].tolist()]).prod(dim=0)
         lam, w = _pencil(b[1], b[0] + b[1])
-        c0, c1 = dim.term_coefficients
-        diagonal = c0[:, None] * (1 - lam)[None, :] + c1[:, None] * lam[None, :]
-        y = (dim.load[:, None] * (w.T @ h)[None, :] / diagonal) @ w.T
+        y = (dim.solve_each(torch.stack([1 - lam, lam], dim=1)) * (w.T @ h)[None, :]) @ w.T
         amplitudes = y.norm(dim=0)
         # A mode the projection leaves empty keeps its factor, with amplitude zero.
         factors[d][:] = torch.where(amplitudes > 0, y / amplitudes.clamp_min(1e-300), factors[d])
