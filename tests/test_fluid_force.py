@@ -5,7 +5,10 @@ import torch
 
 import ptwin
 from ptwin.pgd.basis import Basis, BasisError
+from ptwin.pgd.build import build_basis
+from ptwin.pgd.config import Grid
 from ptwin.pgd.reference import force_coefficient
+from tests.conftest import small_config
 
 
 def test_gradcheck_in_velocity_radius_height_and_permeability(basis_file):
@@ -103,3 +106,24 @@ def test_corrupted_truncated_and_foreign_files_are_refused(basis_file, tmp_path)
     torch.save(payload, foreign)
     with pytest.raises(BasisError, match="basis format 'ptwin-pgd-basis/0'"):
         Basis.load(foreign)
+
+
+def test_paper_coordinates_contract_the_tucker_core_like_einsum():
+    # The paper's R × H separation leaves R and H of rank > 1: the general Tucker path
+    # (its accuracy, which stalls, is shown by `make bench`).
+    basis = build_basis(small_config(coordinates="paper", height=Grid(1e-6, 1e-2, 41)), progress=lambda line: None)
+    layer = ptwin.FluidForce(basis, permeability=2e-16, viscosity=1e-3)
+    assert layer.core.numel() > 1 and layer._separable_prefactor is None
+    generator = torch.Generator().manual_seed(2)
+    velocity = 10 ** (torch.rand(50, generator=generator, dtype=torch.float64) * 4 - 8)
+    radius = 10 ** (torch.rand(50, generator=generator, dtype=torch.float64) * 2 - 7)
+    height = 10 ** (torch.rand(50, generator=generator, dtype=torch.float64) * 3 - 5)
+    permeability = torch.tensor(2e-16, dtype=torch.float64)
+    factors = [
+        layer.functions[0](velocity),
+        layer.functions[1](permeability.reshape(1)).expand(50, -1),
+        layer.functions[2](radius),
+        layer.functions[3](height),
+    ]
+    expected = 1e-3 * torch.einsum("abcd,na,nb,nc,nd->n", layer.core, *factors)
+    assert torch.allclose(layer(velocity, radius, height), expected, rtol=1e-12, atol=0)

@@ -152,8 +152,12 @@ class FluidForce(nn.Module):
         ]
         if self.core.numel() == 1:
             return self.core.reshape(()) * factors[0][:, 0] * factors[1][:, 0] * factors[2][:, 0] * factors[3][:, 0]
-        batch = [f.expand(u.numel(), -1) for f in factors]
-        return torch.einsum("abcd,na,nb,nc,nd->n", self.core, *batch)
+        # One dimension at a time, last first: the widest intermediate is (B, r0·r1·r2),
+        # where a single einsum over the core would build (B, r1·r2·r3) (GBs per 1e6 points).
+        value = factors[3] @ self.core.reshape(-1, self.core.shape[3]).T
+        for factor in (factors[2], factors[1], factors[0]):
+            value = (value.reshape(value.shape[0], -1, factor.shape[1]) * factor[:, None, :]).sum(-1)
+        return value[:, 0]
 
     def _in_range(self, name: str, values: torch.Tensor, clamp_above: bool = False) -> torch.Tensor:
         function = self.functions[self.names.index(name)]
