@@ -5,14 +5,16 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg
 import torch
+from omegaconf import OmegaConf
 
+from ptwin.pgd.build import build_basis
 from ptwin.pgd.config import PGDConfig
 from ptwin.pgd.fem import interval_matrices, triangle_matrices
 from ptwin.pgd.mesh import unit_disc
 from ptwin.pgd.problem import build_problem, log_grid
 from ptwin.pgd.reference import bessel_pressure, discrete_force_coefficient, force_coefficient
 from ptwin.pgd.verify import verify
-from tests.conftest import small_config
+from tests.conftest import compose_train, small_config
 
 
 def test_closed_form_limit_and_thin_film():
@@ -84,13 +86,9 @@ def test_velocity_and_permeability_modes_are_exact_power_laws(small_basis):
 
 
 @pytest.mark.slow
-def test_default_preset_meets_its_tolerances():
-    import yaml
-
-    from ptwin.pgd.build import build_basis
-
-    values = yaml.safe_load(open("configs/pgd/default.yaml"))
-    values.pop("defaults")
+@pytest.mark.parametrize("preset, closed_form", [("default", 1e-3), ("precise", 1e-4)])
+def test_preset_meets_its_tolerances(preset, closed_form):
+    values = OmegaConf.to_container(compose_train(f"pgd={preset}").pgd, resolve=True)
     report = verify(build_basis(PGDConfig.from_dict(values), progress=lambda line: None))
-    assert report["closed_form"] <= 1e-3
+    assert report["closed_form"] <= closed_form
     assert report["discrete"] <= 1e-4
