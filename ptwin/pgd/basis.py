@@ -44,12 +44,12 @@ class Basis:
         for dim in problem.dims[2:]:
             grid = getattr(config, dim.name)
             grids[dim.name] = (grid.minimum, grid.maximum, grid.nodes)
+        nodal = [problem.plane_modes @ solution.factors[0], *solution.factors[1:]]  # the plane's eigenbasis to nodes
         field = {
             "plane_nodes": torch.from_numpy(problem.plane_nodes[problem.plane_free]),
             "thickness_nodes": torch.from_numpy(problem.thickness_nodes),
             "amplitudes": solution.amplitudes,
-            **{f"factors_{name}": f for name, f in zip(solution.names, solution.factors)},
-            "factors_plane": problem.plane_modes @ solution.factors[0],  # nodal values
+            **{f"factors_{name}": f for name, f in zip(solution.names, nodal)},
         }
         stats = {**stats, "history": solution.history}
         return cls(config, force, grids, field, stats)

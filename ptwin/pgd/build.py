@@ -10,7 +10,7 @@ from pathlib import Path
 import torch
 
 from ptwin.pgd.basis import Basis
-from ptwin.pgd.compression import force_modes, recompress
+from ptwin.pgd.compression import force_amplitudes, force_modes, recompress
 from ptwin.pgd.config import PGDConfig
 from ptwin.pgd.enrichment import enrich
 from ptwin.pgd.problem import build_problem
@@ -67,7 +67,7 @@ def _force_at_probes(problem, count: int = 64, seed: int = 0):
 
     def output(factors, amplitudes):
         plane, thickness, *parameters = factors
-        beta = amplitudes * (problem.dims[0].load @ plane) * thickness[-1]
+        beta = force_amplitudes(amplitudes, plane, thickness, problem.dims[0].load)
         return (beta * torch.stack([p[i] for p, i in zip(parameters, index)]).prod(dim=0)).sum(dim=1)
 
     return output

@@ -26,11 +26,16 @@ class SeparatedForce:
     core: torch.Tensor
 
 
+def force_amplitudes(amplitudes, plane, thickness, top_integral: torch.Tensor) -> torch.Tensor:
+    """β_i = α_i·(∫_disc plane_i)·thickness_i(φ = 1): each mode's force per parameter
+    product; ``top_integral`` (N_plane,) integrates a plane factor over the disc."""
+    return amplitudes * (top_integral @ plane) * thickness[-1]
+
+
 def force_modes(solution: SeparatedSolution, top_integral: torch.Tensor, radius_nodes: torch.Tensor):
-    """(β, parameter factors) of the force of one separated pressure solution;
-    ``top_integral`` (N_plane,) integrates a plane factor over the disc."""
+    """(β, parameter factors) of the force of one separated pressure solution."""
     plane, thickness, *parameters = solution.factors
-    beta = solution.amplitudes * (top_integral @ plane) * thickness[-1]
+    beta = force_amplitudes(solution.amplitudes, plane, thickness, top_integral)
     parameters[2] = parameters[2] * radius_nodes[:, None] ** 2
     return beta, parameters
 

@@ -80,9 +80,9 @@ class BandedDimension:
     load: torch.Tensor
 
     def __post_init__(self):
-        # (3, N) in scipy's solve_banded layout: upper, main and lower diagonals.
-        self._bands = np.stack([_bands(self.stiffness), _bands(self.mass)])
-        self._term_bands = torch.from_numpy(np.einsum("tk,kbn->tbn", self.term_weights.numpy(), self._bands))
+        # (T, 3, N) in scipy's solve_banded layout: upper, main and lower diagonals of each term.
+        bands = np.stack([_bands(self.stiffness), _bands(self.mass)])
+        self._term_bands = torch.from_numpy(np.einsum("tk,kbn->tbn", self.term_weights.numpy(), bands))
 
     @property
     def size(self) -> int:

@@ -65,19 +65,20 @@ class LogGridFunctions(nn.Module):
             if isinstance(exponent, int):
                 return (prefactor * p**exponent)[:, None]
             return (prefactor * torch.sign(p) * p.abs() ** exponent)[:, None]
-        a, b, c, d, t = self._cubic_at(p)
-        value = ((a * t + b) * t + c) * t + d
+        value = self._hermite(p)[0]
         return self.signs * torch.exp(value) if self.logarithmic else value
 
     def log_and_slope(self, p: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """log|g_k(p)| and its log–log slope d log|g_k| / d log p, (B, r) each, for a
         table of one-signed functions: the derivative comes with the value, in closed form."""
-        a, b, c, d, t = self._cubic_at(p)
-        return ((a * t + b) * t + c) * t + d, ((3 * a * t + 2 * b) * t + c) / self.step
+        value, a, b, c, t = self._hermite(p)
+        return value, ((3 * a * t + 2 * b) * t + c) / self.step
 
-    def _cubic_at(self, p: torch.Tensor):
-        """The Horner coefficients (B, r) of p's interval and the local coordinate t (B, 1)."""
+    def _hermite(self, p: torch.Tensor):
+        """The table's cubic at p (B, r), with its interval's leading coefficients a, b, c
+        (B, r) and the local coordinate t (B, 1) for the derivative."""
         u = (torch.log(p) - math.log(self.minimum)) / self.step
         index = u.detach().floor().clamp(0, self.cubic.shape[0] - 1).long()
         a, b, c, d = self.cubic[index].unbind(-1)
-        return a, b, c, d, (u - index)[:, None]
+        t = (u - index)[:, None]
+        return ((a * t + b) * t + c) * t + d, a, b, c, t
