@@ -2,7 +2,7 @@
 
 Generates (forward simulator, closed-form Darcy) sets hiding each vocabulary term at
 two magnitudes, two pairs, null sets of three geometries and one effect outside the
-vocabulary; runs train.py's chain and diagnosis on each; prints expected vs named
+vocabulary; runs the pipeline of train.py on each; prints expected vs named
 terms, the K error before/after correction, the test-RMSE gain and the run time.
 """
 
@@ -18,9 +18,10 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
-import train as train_script
+from ptwin.app import register, typed
 from ptwin.data.recordings import write_recordings
-from ptwin.data.simulator import Experiment, simulate
+from ptwin.pipeline.run import run
+from ptwin.synth.simulator import Experiment, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = [
@@ -52,6 +53,7 @@ def main() -> None:
     parser.add_argument("--only", nargs="*", help="run only the cases whose name contains one of these")
     args = parser.parse_args()
     warnings.filterwarnings("ignore", category=RuntimeWarning)
+    register()
     cache = os.environ.get("PTWIN_CACHE", str(ROOT / ".cache" / "ptwin"))
     cases = [c for c in CASES if not args.only or any(word in c[0] for word in args.only)]
     rows, right = [], 0
@@ -65,7 +67,7 @@ def main() -> None:
                     config_name="train", overrides=[f"data.path={folder}", f"pgd={args.pgd}", f"cache_dir={cache}"]
                 )
             started = time.perf_counter()
-            d = train_script.train(cfg, folder / "run")["diagnosis"]
+            d = run(typed(cfg), folder / "run").diagnosis
             seconds = time.perf_counter() - started
             expected = sorted(t for t in effects if t != "force_drift")
             named = sorted(entry["term"] for entry in d["left_out"])

@@ -17,10 +17,11 @@ from pathlib import Path
 import torch
 from hydra import compose, initialize_config_dir
 
-import train as train_script
+from ptwin.app import register, typed
 from ptwin.fitting.hybrid import hybrid_residual, newton_permeability
 from ptwin.fitting.lm import LevenbergMarquardt
-from ptwin.fitting.physics_fit import fit_physics
+from ptwin.pipeline.identify import identify
+from ptwin.pipeline.prepare import prepare
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -35,18 +36,20 @@ def warm_run_seconds() -> float:
 
 def lm_against_adam(regularisation: float = 1e-2, adam_steps: int = 5000) -> None:
     cache = os.environ.get("PTWIN_CACHE", str(ROOT / ".cache" / "ptwin"))
+    register()
     with initialize_config_dir(config_dir=str(ROOT / "configs"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=[f"data.path={ROOT / 'data' / 'demo'}", f"cache_dir={cache}"])
-    setup = train_script.prepare(cfg)
-    train = setup.split.train
-    base = fit_physics(setup.make_model(), setup.samples, train)
-    noise = setup.samples.noise_floor[train].mean().item()
+    settings = typed(cfg)
+    prepared = prepare(settings, progress=lambda line: None)
+    samples, train = prepared.samples, prepared.split.train
+    base = identify(prepared, settings.optim, progress=lambda line: None).base
+    noise = samples.noise_floor[train].mean().item()
 
     def fresh():
-        twin = setup.make_twin(base.permeability, noise)
-        newton_permeability(twin, setup.samples, train, regularisation)
+        twin = prepared.make_model.twin(base.permeability, noise, samples, train)
+        newton_permeability(twin, samples, train, regularisation)
         groups = twin.parameter_groups()
-        return hybrid_residual(twin, setup.samples, train, regularisation, groups["physics"] + groups["network"])
+        return hybrid_residual(twin, samples, train, regularisation, groups["physics"] + groups["network"])
 
     vector, residual = fresh()
     solver = LevenbergMarquardt(residual, vector.get())

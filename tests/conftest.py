@@ -2,16 +2,16 @@ from pathlib import Path
 
 import pytest
 from hydra import compose, initialize_config_dir
-from omegaconf import OmegaConf
 
-import train as train_script
+from ptwin.app import register, typed
 from ptwin.data.recordings import write_recordings
-from ptwin.data.simulator import Experiment, simulate
 from ptwin.pgd.build import build_basis
 from ptwin.pgd.cache import cached_basis
-from ptwin.pgd.config import Grid, PGDConfig, PlaneMesh, ThicknessMesh
-from ptwin.pgd.enrichment import EnrichmentSettings
-from ptwin.schema import register
+from ptwin.pgd.config import EnrichmentSettings, Grid, PGDConfig, PlaneMesh, ThicknessMesh
+from ptwin.pipeline.run import RunResult
+from ptwin.pipeline.run import run as run_pipeline
+from ptwin.pipeline.settings import Settings
+from ptwin.synth.simulator import Experiment, simulate
 
 
 def small_config(**overrides) -> PGDConfig:
@@ -51,12 +51,16 @@ def compose_train(*overrides):
         return compose(config_name="train", overrides=list(overrides))
 
 
+def settings_for(*overrides) -> Settings:
+    """The typed settings train.py would run with ``overrides``."""
+    return typed(compose_train(*overrides))
+
+
 @pytest.fixture(scope="session")
 def coarse_cache(tmp_path_factory):
     """A cache directory holding the ``coarse`` preset's basis (built once per session)."""
     folder = tmp_path_factory.mktemp("cache")
-    cfg = compose_train("pgd=coarse", "data.path=unused", f"cache_dir={folder}")
-    cached_basis(PGDConfig.from_dict(OmegaConf.to_container(cfg.pgd, resolve=True)), folder, progress=lambda _: None)
+    cached_basis(settings_for("pgd=coarse", "data.path=-", "cache_dir=-").pgd, folder, progress=lambda _: None)
     return folder
 
 
@@ -68,9 +72,10 @@ def simulated_set(folder: Path, **experiment) -> Path:
     return folder
 
 
-def run(folder, cache, output, *overrides):
-    cfg = compose_train(f"data.path={folder}", "pgd=coarse", f"cache_dir={cache}", *overrides)
-    return train_script.train(cfg, output)
+def run(folder, cache, output, *overrides) -> RunResult:
+    """The pipeline as train.py runs it, on the coarse basis."""
+    settings = settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={cache}", *overrides)
+    return run_pipeline(settings, output, progress=lambda line: None)
 
 
 @pytest.fixture(scope="session")

@@ -6,9 +6,9 @@ import pandas as pd
 import pytest
 import yaml
 
+from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.recordings import load_recordings
-from ptwin.physics.kinematics import curve_kinematics
-from ptwin.synth import main
+from ptwin.synth.cli import main
 
 DEMO = Path(__file__).parent.parent / "data"
 pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")

@@ -20,14 +20,14 @@ def test_whiteness_is_one_for_noise_and_large_for_structure():
 
 def test_clean_data_no_mismatch_no_term(clean_run):
     outcome, output = clean_run
-    diagnosis = outcome["diagnosis"]
+    diagnosis = outcome.diagnosis
     assert diagnosis["mismatch"]["detected"] is False
     assert diagnosis["left_out"] == [] and diagnosis["unexplained"] is False
     assert json.loads((output / "diagnosis.json").read_text()) == diagnosis
 
 
 def test_concealed_viscosity_is_named_and_refitted(viscous_run):
-    diagnosis = viscous_run["diagnosis"]
+    diagnosis = viscous_run.diagnosis
     assert diagnosis["mismatch"]["detected"] is True
     assert [entry["term"] for entry in diagnosis["left_out"]] == ["solid_viscosity"]
     assert diagnosis["left_out"][0]["params"]["gamma"] == pytest.approx(5.0, rel=0.05)
@@ -36,7 +36,7 @@ def test_concealed_viscosity_is_named_and_refitted(viscous_run):
 
 
 def test_demo_names_pore_pressure_relaxation(demo_run):
-    diagnosis, stages = demo_run["diagnosis"], demo_run["results"]["stages"]
+    diagnosis, stages = demo_run.diagnosis, demo_run.results["stages"]
     noise = diagnosis["noise_floor"]
     assert [entry["term"] for entry in diagnosis["left_out"]] == ["pore_pressure_relaxation"]
     assert diagnosis["left_out"][0]["params"]["M"] == pytest.approx(3.0e4, rel=0.05)
@@ -46,3 +46,63 @@ def test_demo_names_pore_pressure_relaxation(demo_run):
     # The hybrid twin: within 1.5× the noise, clearly below stage 1.
     assert stages["hybrid"]["test_rmse"] < 1.5 * noise
     assert stages["hybrid"]["test_rmse"] < 0.5 * stages["elastic_darcy"]["test_rmse"]
+
+
+def candidate(terms, chi_square, val_rmse, violations=None, whiteness=1.0):
+    """A candidate with a chosen misfit: BIC = n log(χ²/n) + p log n over n = 1000 samples."""
+    from ptwin.diagnosis.name import Candidate
+    from ptwin.fitting.physics_fit import PhysicsFit
+
+    params = {t: {"p": 1.0} for t in terms}
+    fit = PhysicsFit(terms, 1.0, 0.1, params, params, params, violations or {}, chi_square, 1000, 1, None)
+    return Candidate(fit, val_rmse, whiteness)
+
+
+def test_choose_takes_the_lowest_physical_bic_then_prunes_what_does_not_pay_twice():
+    from ptwin.diagnosis.name import choose, confounded, rejected
+
+    candidates = {
+        c.terms: c
+        for c in (
+            candidate((), 2000.0, 2.0),
+            candidate(("a",), 1100.0, 1.0),
+            candidate(("b",), 1900.0, 1.9),
+            candidate(("c",), 1000.0, 0.9, {"c": "p < 0"}),  # the best fit, but not physical
+            candidate(("d",), 1101.0, 1.01),  # as good as a: confounded with it
+            candidate(("a", "b"), 1080.0, 0.98),  # 11 BIC better than a, but only 2% on held-out data
+        )
+    }
+    chosen, notes = choose(candidates, bic_margin=10.0, heldout_margin=0.10)
+    assert chosen == ("a",)
+    assert notes == ["b pruned: removing it costs 11.4 BIC and 2.0% of the validation RMS (needs ≥ 10 and ≥ 10%)"]
+    assert confounded(candidates, chosen, 10.0, 0.10) == [("d",)]
+    assert rejected(candidates, 10.0) == [{"term": "c", "params": {"p": 1.0}, "why": "p < 0"}]
+    strong_pair = {**candidates, ("a", "b"): candidate(("a", "b"), 1050.0, 0.8)}
+    assert choose(strong_pair, 10.0, 0.10) == (("a", "b"), [])
+
+
+@pytest.mark.parametrize(("max_terms", "pair_whiteness", "largest"), [(3, 50.0, 3), (3, 2.0, 2), (1, 50.0, 1)])
+def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_structure(
+    monkeypatch, max_terms, pair_whiteness, largest
+):
+    import torch
+
+    import ptwin.diagnosis.name as name
+
+    fitted = []
+
+    def fit_with_starts(make_model, subset, samples, index, iterations):
+        fitted.append(subset)
+        fit = candidate(subset, 1000.0 + 100.0 * (3 - len(subset)), 1.0).fit
+        fit.model = lambda samples: samples.force + len(subset)  # its residual tells its size
+        return fit
+
+    whiteness = {0: 50.0, 1: 50.0, 2: pair_whiteness, 3: 1.0}  # by subset size
+    monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
+    monkeypatch.setattr(name, "rmse", lambda *args: 1.0)
+    monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
+    samples = type("Samples", (), {"force": torch.zeros(10)})()
+    split = type("Split", (), {"train": torch.arange(5), "val": torch.arange(5, 8)})()
+    name.fit_candidates(None, samples, split, ["a", "b", "c"], max_terms, 1, 50, 5.0, progress=lambda line: None)
+    assert max(len(t) for t in fitted) == largest
+    assert sum(len(t) == largest for t in fitted) == {1: 3, 2: 3, 3: 1}[largest]

@@ -1,14 +1,14 @@
-"""The elastic law read off the reference curve, against the Hertz truth."""
+"""The self-consistent elastic law read off the reference curve, against the Hertz truth."""
 
-import numpy as np
 import pytest
 import torch
 
 import ptwin
+from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.recordings import load_recordings, write_recordings
-from ptwin.data.simulator import Experiment, simulate
-from ptwin.physics.elastic import ReferenceElasticLaw, hertz_force
-from ptwin.physics.kinematics import curve_kinematics
+from ptwin.physics.elastic import ReferenceCurve, hertz_force
+from ptwin.physics.model import ForceModel
+from ptwin.synth.simulator import Experiment, simulate
 
 pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 
@@ -21,28 +21,48 @@ def reference(tmp_path_factory):
     return experiment, curve_kinematics(load_recordings(folder))[0]
 
 
+def model(experiment, curve, basis_file, terms=(), values=None, self_consistent=True):
+    fluid = ptwin.FluidForce.load(basis_file, permeability=experiment.permeability, viscosity=1e-3)
+    e = experiment
+    return ForceModel(ReferenceCurve(curve), fluid, e.probe_radius, e.sample_thickness, terms, values, self_consistent)
+
+
 def test_self_consistent_law_recovers_hertz_and_the_paper_variant_does_not(reference, basis_file):
     e, curve = reference
-    fluid = ptwin.FluidForce.load(basis_file, permeability=e.permeability, viscosity=e.fluid_viscosity)
     depth = torch.linspace(0.5e-6, 3.5e-6, 50, dtype=torch.float64)
     hertz = torch.from_numpy(hertz_force(depth.numpy(), e.effective_modulus, e.probe_radius))
-    args = (curve, e.probe_radius, e.sample_thickness)
     with torch.no_grad():
-        consistent = ReferenceElasticLaw(*args, fluid=fluid)(depth) - hertz
-        paper = ReferenceElasticLaw(*args, fluid=None)(depth) - hertz
+        consistent = model(e, curve, basis_file).elastic(depth) - hertz
+        paper = model(e, curve, basis_file, self_consistent=False).elastic(depth) - hertz
     # The 2 µm/s curve's own Darcy force is tens of nN: the paper's law carries it, ours removes it.
     assert consistent.abs().max() < e.noise_std
     assert paper.min() > 0 and paper.mean() > 5 * consistent.abs().max()
     assert paper[-1] > 10 * consistent.abs().max()  # the bias grows with depth, as R³
 
 
-def test_law_is_monotone_and_differentiable_in_permeability(reference, basis_file):
+def test_law_moves_with_permeability_by_exactly_the_reference_curves_darcy_force(reference, basis_file):
+    # F_el = F_ref − F_D(K) and F_D ∝ 1/K, so ∂F_el/∂log K = +F_D at every node: autograd
+    # through the self-consistent law against the fluid force evaluated on its own.
     e, curve = reference
-    fluid = ptwin.FluidForce.load(basis_file, permeability=e.permeability, viscosity=e.fluid_viscosity)
-    law = ReferenceElasticLaw(curve, e.probe_radius, e.sample_thickness, fluid=fluid)
-    depth = torch.linspace(0.0, 3.6e-6, 400, dtype=torch.float64)
-    force = law(depth)
-    assert np.all(np.diff(law.reference_force.numpy()) >= 0)
-    (gradient,) = torch.autograd.grad(force[-1], fluid.log_permeability)
-    # F_el = F_ref − F_D with F_D ∝ 1/K: dF_el/dlogK = +F_D > 0.
-    assert gradient.item() > 0
+    base = model(e, curve, basis_file)
+    nodes = base.reference.node_samples()
+    (gradient,) = torch.autograd.grad(base.elastic_nodes().sum(), base.fluid.log_permeability)
+    with torch.no_grad():
+        fluid = base.rate_forces(nodes)["fluid"]
+    assert fluid.sum() > 1e-9  # a fluid force worth following
+    assert gradient.item() == pytest.approx(fluid.sum().item(), rel=1e-10)
+
+
+def test_relaxation_on_the_reference_curve_is_solved_to_its_fixed_point(reference, basis_file):
+    # With solid relaxation the law solves F_el + g·relax(F_el) = F_ref − F_D: a fixed point.
+    e, curve = reference
+    relaxed = model(e, curve, basis_file, ("solid_relaxation",), {"solid_relaxation": {"g": 0.2, "tau": 0.5}})
+    nodes = relaxed.reference.node_samples()
+    term = relaxed.terms["solid_relaxation"]
+    with torch.no_grad():
+        elastic = relaxed.elastic_nodes()
+        unrelaxed = nodes.force - relaxed.rate_forces(nodes)["fluid"]
+        residual = elastic + term.elastic_force(nodes, elastic) - unrelaxed
+    relaxation = term.elastic_force(nodes, elastic).abs().max()
+    assert relaxation > 0.02 * unrelaxed.abs().max()  # the relaxation matters on this curve ...
+    assert residual.abs().max() < 1e-4 * unrelaxed.abs().max()  # ... and is solved for, not applied once

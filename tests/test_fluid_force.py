@@ -4,7 +4,8 @@ import pytest
 import torch
 
 import ptwin
-from ptwin.pgd.basis import Basis, BasisError
+from ptwin import files
+from ptwin.pgd.basis import FORMAT, Basis, BasisError
 from ptwin.pgd.build import build_basis
 from ptwin.pgd.config import Grid
 from ptwin.pgd.reference import force_coefficient
@@ -89,23 +90,21 @@ def test_save_load_round_trip_is_bit_exact(small_basis, basis_file, tmp_path):
 
 
 def test_corrupted_truncated_and_foreign_files_are_refused(basis_file, tmp_path):
-    data = bytearray(basis_file.read_bytes())
+    data = basis_file.read_bytes()
     truncated = tmp_path / "truncated.pt"
-    truncated.write_bytes(bytes(data[: len(data) // 2]))
-    with pytest.raises(BasisError, match="truncated.pt: not a readable PGD basis"):
+    truncated.write_bytes(data[: len(data) // 2])
+    with pytest.raises(BasisError, match="truncated.pt: checksum mismatch, the file is damaged; rebuild it"):
         Basis.load(truncated)
-    flipped = tmp_path / "flipped.pt"
-    payload = torch.load(basis_file, weights_only=True)
-    payload["tensors"]["force_core"] = payload["tensors"]["force_core"] * (1 + 1e-12)
-    torch.save(payload, flipped)
-    with pytest.raises(BasisError, match="checksum mismatch"):
-        Basis.load(flipped)
-    payload = torch.load(basis_file, weights_only=True)
+    payload = files.load(basis_file, FORMAT, "")
     payload["format"] = "ptwin-pgd-basis/0"
     foreign = tmp_path / "foreign.pt"
-    torch.save(payload, foreign)
-    with pytest.raises(BasisError, match="basis format 'ptwin-pgd-basis/0'"):
+    files.save(foreign, payload)
+    with pytest.raises(BasisError, match="format 'ptwin-pgd-basis/0', this ptwin reads 'ptwin-pgd-basis/2'"):
         Basis.load(foreign)
+    plain = tmp_path / "plain.pt"
+    torch.save(payload, plain)  # a file ptwin did not write
+    with pytest.raises(BasisError, match="plain.pt: not a ptwin file"):
+        Basis.load(plain)
 
 
 def test_paper_coordinates_contract_the_tucker_core_like_einsum():
@@ -120,10 +119,10 @@ def test_paper_coordinates_contract_the_tucker_core_like_einsum():
     height = 10 ** (torch.rand(50, generator=generator, dtype=torch.float64) * 3 - 5)
     permeability = torch.tensor(2e-16, dtype=torch.float64)
     factors = [
-        layer.functions[0](velocity),
-        layer.functions[1](permeability.reshape(1)).expand(50, -1),
-        layer.functions[2](radius),
-        layer.functions[3](height),
+        layer.functions["velocity"](velocity),
+        layer.functions["permeability"](permeability.reshape(1)).expand(50, -1),
+        layer.functions["contact_radius"](radius),
+        layer.functions["height"](height),
     ]
     expected = 1e-3 * torch.einsum("abcd,na,nb,nc,nd->n", layer.core, *factors)
     assert torch.allclose(layer(velocity, radius, height), expected, rtol=1e-12, atol=0)

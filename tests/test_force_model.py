@@ -4,9 +4,9 @@ import pytest
 import torch
 
 import ptwin
+from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.recordings import load_recordings
-from ptwin.physics.elastic import ReferenceElasticLaw
-from ptwin.physics.kinematics import curve_kinematics
+from ptwin.physics.elastic import ReferenceCurve
 from ptwin.physics.model import ForceModel
 from ptwin.physics.samples import Samples
 from tests.conftest import simulated_set
@@ -29,8 +29,7 @@ def model_for(folder, basis_path, terms, values):
     curves = curve_kinematics(recordings)
     reference, others = curves[0], curves[1:]
     fluid = ptwin.FluidForce.load(basis_path, permeability=2.0e-16, viscosity=meta.fluid_viscosity)
-    elastic = ReferenceElasticLaw(reference, meta.probe_radius, meta.sample_thickness, None)
-    model = ForceModel(elastic, fluid, meta.probe_radius, meta.sample_thickness, terms, values)
+    model = ForceModel(ReferenceCurve(reference), fluid, meta.probe_radius, meta.sample_thickness, terms, values)
     return model, Samples.from_curves(others)
 
 

@@ -1,5 +1,6 @@
 """Import of real vendor AFM recordings (../shared/data/afm, read in place)."""
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -37,8 +38,14 @@ def test_vendor_file_becomes_a_valid_recording_set(tmp_path, name, extra, speed)
     assert z[0] < 0 < z[-1]  # the estimated contact lies inside the approach
 
 
-def test_files_of_different_cantilevers_are_refused(tmp_path):
+def test_files_of_different_cantilevers_are_refused(tmp_path, capsys):
     files = [str(AFM / "fmt-jpk-fd_spot3-0192.jpk-force"), str(AFM / "fmt-igor-fd_U3_3_p10004.ibw")]
-    with pytest.raises(SystemExit):
+    with pytest.raises(SystemExit) as exit:
         main([*files, "--out", str(tmp_path / "set"), *COMMON])
+    assert exit.value.code == 2
+    assert re.fullmatch(
+        r"spring constants differ \(fmt-jpk-fd_spot3-0192\.jpk-force 0\.043\d* N/m, fmt-igor-fd_U3_3_p10004\.ibw "
+        r"0\.314\d* N/m\); a recording set is one cantilever: import them apart",
+        capsys.readouterr().err.strip(),
+    )
     assert not (tmp_path / "set").exists()

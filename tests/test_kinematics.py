@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ptwin.physics.kinematics import contact_radius, noise_floor, smoothed_derivative
+from ptwin.data.kinematics import contact_radius, noise_floor, smoothed_derivative
 
 
 def test_contact_radius_is_the_spherical_cap():

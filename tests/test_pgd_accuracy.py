@@ -5,16 +5,14 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg
 import torch
-from omegaconf import OmegaConf
 
 from ptwin.pgd.build import build_basis
-from ptwin.pgd.config import PGDConfig
 from ptwin.pgd.fem import interval_matrices, triangle_matrices
 from ptwin.pgd.mesh import unit_disc
 from ptwin.pgd.problem import build_problem, log_grid
 from ptwin.pgd.reference import bessel_pressure, discrete_force_coefficient, force_coefficient
-from ptwin.pgd.verify import verify
-from tests.conftest import compose_train, small_config
+from ptwin.physics.fluid_accuracy import verify
+from tests.conftest import settings_for, small_config
 
 
 def test_closed_form_limit_and_thin_film():
@@ -88,7 +86,8 @@ def test_velocity_and_permeability_modes_are_exact_power_laws(small_basis):
 @pytest.mark.slow
 @pytest.mark.parametrize("preset, closed_form", [("default", 1e-3), ("precise", 1e-4)])
 def test_preset_meets_its_tolerances(preset, closed_form):
-    values = OmegaConf.to_container(compose_train(f"pgd={preset}").pgd, resolve=True)
-    report = verify(build_basis(PGDConfig.from_dict(values), progress=lambda line: None))
+    report = verify(
+        build_basis(settings_for(f"pgd={preset}", "data.path=-", "cache_dir=-").pgd, progress=lambda line: None)
+    )
     assert report["closed_form"] <= closed_form
     assert report["discrete"] <= 1e-4

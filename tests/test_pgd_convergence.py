@@ -36,3 +36,13 @@ def test_thickness_order_is_two_on_the_graded_mesh():
         config.thickness.nodes = n
         errors.append((discrete_force_coefficient(build_problem(config), x) / reference - 1)[0])
     assert abs(observed_order(1.0 / np.array(counts), errors) - 2.0) < 0.2
+
+
+def test_the_cache_key_ignores_the_grid_of_the_other_coordinates():
+    from ptwin.pgd.config import Grid
+
+    scaled = small_config()
+    assert small_config(height=Grid(1e-6, 1e-3, 7)).hash() == scaled.hash()
+    assert small_config(aspect_ratio=Grid(0.2, 1e5, 121)).hash() != scaled.hash()
+    paper = small_config(coordinates="paper")
+    assert small_config(coordinates="paper", height=Grid(1e-6, 1e-3, 7)).hash() != paper.hash()

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
+from ptwin.data.kinematics import contact_radius, smoothed_derivative
 from ptwin.data.recordings import load_recordings, write_recordings
-from ptwin.data.simulator import Experiment, simulate, simulate_curve
 from ptwin.pgd.reference import force_coefficient
 from ptwin.physics.elastic import hertz_force
-from ptwin.physics.kinematics import contact_radius, smoothed_derivative
+from ptwin.synth.simulator import Experiment, simulate, simulate_curve
 
 # scipy's numerical Jacobian overflows harmlessly on the stiff contact transient.
 pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")

@@ -36,3 +36,37 @@ def test_a_typo_in_a_config_key_fails_at_the_command_line(tmp_path):
     result = run_train(tmp_path, "pgd.plane.ringz=3")
     assert result.returncode != 0
     assert "ringz" in result.stderr
+
+
+def test_top_level_keys_are_typed_too(tmp_path):
+    result = run_train(tmp_path, "seed=abc")
+    assert result.returncode != 0
+    assert "seed" in result.stderr and "abc" in result.stderr
+
+
+def test_a_setting_that_composes_but_cannot_run_ends_with_one_line(tmp_path):
+    result = run_train(tmp_path, "diagnosis.terms=[solid_viscosity,viscosity]")
+    assert result.returncode == 2
+    assert (
+        result.stderr.strip().splitlines()[-1].startswith("diagnosis.terms: unknown ['viscosity']; the vocabulary is")
+    )
+    assert "Traceback" not in result.stderr
+
+
+def test_the_basis_command_builds_where_train_py_looks(tmp_path):
+    from ptwin.pgd.cache import cache_path, cached_basis
+    from tests.conftest import settings_for
+
+    result = subprocess.run(
+        [sys.executable, "-m", "ptwin.pgd", "pgd=coarse", f"cache_dir={tmp_path}", f"hydra.run.dir={tmp_path / 'run'}"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    config = settings_for("pgd=coarse", "data.path=-", "cache_dir=-").pgd
+    assert cache_path(config, tmp_path).is_file()
+    lines = []
+    cached_basis(config, tmp_path, progress=lines.append)
+    assert lines == [f"reusing PGD basis {cache_path(config, tmp_path)}"]

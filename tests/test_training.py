@@ -16,7 +16,7 @@ TRUE_K = 2.0e-16
 
 def test_clean_data_every_stage_finds_k_and_nothing_else(clean_run):
     outcome, output = clean_run
-    stages, noise = outcome["results"]["stages"], outcome["results"]["noise_floor"]
+    stages, noise = outcome.results["stages"], outcome.results["noise_floor"]
     for name in ("elastic_darcy", "viscous", "hybrid"):
         assert stages[name]["permeability"] == pytest.approx(TRUE_K, rel=0.01), name
     gamma = stages["viscous"]["params"]["solid_viscosity"]
@@ -35,13 +35,13 @@ def test_clean_data_every_stage_finds_k_and_nothing_else(clean_run):
 
 
 def test_stage_two_recovers_a_concealed_viscosity(viscous_run):
-    gamma = viscous_run["results"]["stages"]["viscous"]["params"]["solid_viscosity"]["gamma"]
+    gamma = viscous_run.results["stages"]["viscous"]["params"]["solid_viscosity"]["gamma"]
     assert gamma == pytest.approx(5.0, rel=0.05)
 
 
 def quick(*extra):
     return (
-        "diagnosis.enabled=false",
+        "diagnosis.terms=[]",
         "optim.hybrid.regularisations=[1.0e-2,1.0]",
         "optim.hybrid.iterations=12",
         "optim.hybrid.checkpoint_every=4",
@@ -51,8 +51,8 @@ def quick(*extra):
 
 def test_same_seed_same_result_and_a_killed_run_resumes_to_it(tmp_path, coarse_cache, monkeypatch):
     folder = simulated_set(tmp_path / "set", base_speeds=(0.5e-6, 8e-6, 80e-6), samples=400)
-    first = run(folder, coarse_cache, tmp_path / "a", *quick())["results"]["stages"]["hybrid"]
-    again = run(folder, coarse_cache, tmp_path / "b", *quick())["results"]["stages"]["hybrid"]
+    first = run(folder, coarse_cache, tmp_path / "a", *quick()).results["stages"]["hybrid"]
+    again = run(folder, coarse_cache, tmp_path / "b", *quick()).results["stages"]["hybrid"]
     assert first == again  # bit for bit
 
     saves, original = [], checkpoint.save_checkpoint
@@ -68,12 +68,11 @@ def test_same_seed_same_result_and_a_killed_run_resumes_to_it(tmp_path, coarse_c
         run(folder, coarse_cache, tmp_path / "c", *quick())
     monkeypatch.setattr(checkpoint, "save_checkpoint", original)
     ckpt = tmp_path / "c" / "checkpoint.pt"
-    resumed = run(folder, coarse_cache, tmp_path / "d", *quick(f"ckpt_path={ckpt}"))["results"]["stages"]["hybrid"]
+    resumed = run(folder, coarse_cache, tmp_path / "d", *quick(f"ckpt_path={ckpt}")).results["stages"]["hybrid"]
     assert resumed == first
     finished = tmp_path / "a" / "checkpoint.pt"  # a finished run: the twin is restored, not trained again
     assert (
-        run(folder, coarse_cache, tmp_path / "f", *quick(f"ckpt_path={finished}"))["results"]["stages"]["hybrid"]
-        == first
+        run(folder, coarse_cache, tmp_path / "f", *quick(f"ckpt_path={finished}")).results["stages"]["hybrid"] == first
     )
 
     with pytest.raises(checkpoint.CheckpointError, match="model.hidden: checkpoint 6, now 4"):

@@ -1,5 +1,5 @@
-"""The diagnosis stage: locate, name, refit, and report in the contract's terms
-(``diagnosis.json``, shared/physics-terms.md)."""
+"""The diagnosis stage: locate, name, refit, and say it in the contract's terms
+(``diagnosis.json``, shared/physics-terms.md: ``Diagnosis.to_json`` is its one writer)."""
 
 from __future__ import annotations
 
@@ -10,13 +10,14 @@ from dataclasses import dataclass, field
 import torch
 
 from ptwin.diagnosis.locate import Mismatch, locate
-from ptwin.diagnosis.name import SIGNATURES, Candidate, choose, confounded, fit_candidates, rejected
+from ptwin.diagnosis.name import Candidate, choose, confounded, fit_candidates, rejected
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import rmse_of
 from ptwin.fitting.physics_fit import PhysicsFit, rmse
 from ptwin.fitting.pointwise import ApparentPermeability
 from ptwin.fitting.split import Split
 from ptwin.physics.samples import Samples
+from ptwin.physics.terms import VOCABULARY
 
 FORMAT = "ptwin-diagnosis/1"
 POORLY_IDENTIFIED = 0.5  # relative standard deviation
@@ -25,13 +26,25 @@ CORRELATED = 0.95  # |correlation| with K
 
 @dataclass
 class DiagnosisSettings:
-    terms: list[str]
+    """What the diagnosis tries and how it decides (the ``diagnosis`` config group).
+
+    ``terms``: the candidates (default: the whole vocabulary; [] fits the base model only);
+    ``max_terms``: the largest subset fitted together.
+    """
+
+    terms: list[str] = field(default_factory=lambda: list(VOCABULARY))
     max_terms: int = 2
-    bic_margin: float = 10.0
-    heldout_margin: float = 0.10
-    block: int = 50
-    whiteness_threshold: float = 5.0
-    iterations: int = 60
+    bic_margin: float = 10.0  # a term stays only if removing it costs at least this much BIC ...
+    heldout_margin: float = 0.10  # ... and at least this fraction of the validation RMS
+    block: int = 50  # samples per block of the whiteness test
+    whiteness_threshold: float = 5.0  # block statistic above which a residual is structure, not noise
+
+    def __post_init__(self):
+        unknown = [t for t in self.terms if t not in VOCABULARY]
+        if unknown:
+            raise ValueError(f"diagnosis.terms: unknown {unknown}; the vocabulary is {', '.join(VOCABULARY)}")
+        if self.max_terms < 0:
+            raise ValueError(f"diagnosis.max_terms must be ≥ 0, got {self.max_terms}")
 
 
 @dataclass
@@ -59,7 +72,7 @@ class Diagnosis:
         return self.candidates[self.chosen]
 
     def to_json(self) -> dict:
-        """``diagnosis.json`` as shared/physics-terms.md specifies (plus the confounded pairs)."""
+        """``diagnosis.json`` as shared/physics-terms.md specifies."""
         return {
             "format": FORMAT,
             "mismatch": {
@@ -90,11 +103,6 @@ class Diagnosis:
         }
 
 
-def _explained_fraction(network: torch.Tensor, named: torch.Tensor) -> float:
-    """How much of what the network learned the named terms account for: 1 − ‖Y1 − Δ‖²/‖Y1‖²."""
-    return 1.0 - (network - named).square().sum().item() / max(network.square().sum().item(), 1e-300)
-
-
 def diagnose(
     make_model: Callable,
     samples: Samples,
@@ -102,11 +110,12 @@ def diagnose(
     hybrid: HybridTwin,
     apparent: ApparentPermeability,
     settings: DiagnosisSettings,
+    iterations: int,
     progress: Callable[[str], None] = print,
     base_fit: PhysicsFit | None = None,
 ) -> Diagnosis:
-    """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); ``base_fit``: the base
-    model already fitted on ``split.train`` with ``settings.iterations``, if there is one."""
+    """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); candidate fits run
+    ``iterations`` LM steps; ``base_fit``: the base model already fitted so on ``split.train``, if any."""
     s = settings
     seen = torch.cat([split.train, split.val]).sort().values
     noise_floor = samples.noise_floor[seen].mean().item()
@@ -117,7 +126,7 @@ def diagnose(
         split,
         s.terms,
         s.max_terms,
-        s.iterations,
+        iterations,
         s.block,
         s.whiteness_threshold,
         progress,
@@ -137,58 +146,21 @@ def diagnose(
             f"{s.whiteness_threshold:g}): not claimed"
         )
         chosen, corrected = (), base
-
-    def test_rmse(candidate):
-        return rmse(candidate.fit.model, samples, split.test)
-
+    fit = _fit_table(samples, split, base, corrected, hybrid)
     with torch.no_grad():
         learned = hybrid.network(samples)[seen]
         named = corrected.fit.model(samples)[seen] - base.fit.model(samples)[seen]
-    fit = {
-        "base": {"val_rmse": base.val_rmse, "test_rmse": test_rmse(base)},
-        "corrected": {"val_rmse": corrected.val_rmse, "test_rmse": test_rmse(corrected)},
-        "hybrid": {"val_rmse": rmse_of(hybrid, samples, split.val), "test_rmse": rmse_of(hybrid, samples, split.test)},
-    }
-    witness = _explained_fraction(learned, named)
-
-    confounds = []
-    for other in confounded(candidates, chosen, s.bic_margin, s.heldout_margin):
-        differing = sorted(set(chosen) ^ set(other))
-        tell_apart = "; ".join(SIGNATURES[t] for t in differing)
-        confounds.append({"terms": [" + ".join(chosen), " + ".join(other)], "tell_apart": tell_apart})
-
-    left_out = []
-    for term in chosen:
-        without = candidates.get(tuple(t for t in chosen if t != term), base)
-        gain = test_rmse(without) / fit["corrected"]["test_rmse"]
-        warnings = []
-        for name, value in corrected.fit.params[term].items():
-            std = corrected.fit.param_std[term][name]
-            if not math.isfinite(std) or abs(std) > POORLY_IDENTIFIED * abs(value):
-                warnings.append(f"{name} is poorly identified (std {std:.2g})")
-            if abs(corrected.fit.correlation_with_permeability[term][name]) > CORRELATED:
-                warnings.append(f"{name} is strongly correlated with K")
-        evidence = (
-            f"With {term} refitted jointly with K, the BIC falls by {without.fit.bic - corrected.fit.bic:.0f} and the "
-            f"validation RMS from {without.val_rmse * 1e9:.3g} to {corrected.val_rmse * 1e9:.3g} nN "
-            f"({corrected.val_rmse / noise_floor:.2f}× the noise floor); the named terms account for "
-            f"{100 * witness:.0f}% of the error the hybrid network learned."
-        )
-        others = [c for c in confounds if term in c["terms"][0]]
-        if others:
-            evidence += " Confounded with " + ", ".join(c["terms"][1] for c in others) + "."
-        if warnings:
-            evidence += " Warning: " + "; ".join(warnings) + "."
-        left_out.append(
-            {
-                "term": term,
-                "params": corrected.fit.params[term],
-                "param_std": corrected.fit.param_std[term],
-                "evidence": evidence,
-                "test_rmse_gain": gain,
-            }
-        )
-    left_out.sort(key=lambda entry: -entry["test_rmse_gain"])
+    confounds = [
+        {
+            "terms": [" + ".join(chosen), " + ".join(other)],
+            "tell_apart": "; ".join(VOCABULARY[t].TELL_APART for t in sorted(set(chosen) ^ set(other))),
+        }
+        for other in confounded(candidates, chosen, s.bic_margin, s.heldout_margin)
+    ]
+    context = _Context(samples, split, candidates, corrected, fit, noise_floor, _explained_fraction(learned, named))
+    left_out = sorted(
+        (_left_out_entry(term, chosen, context, confounds) for term in chosen), key=lambda e: -e["test_rmse_gain"]
+    )
     diagnosis = Diagnosis(
         detected=detected,
         summary="",
@@ -206,6 +178,68 @@ def diagnose(
     )
     diagnosis.summary = summarise(diagnosis, apparent, s.whiteness_threshold)
     return diagnosis
+
+
+@dataclass
+class _Context:
+    """What every left-out entry is measured against."""
+
+    samples: Samples
+    split: Split
+    candidates: dict[tuple[str, ...], Candidate]
+    corrected: Candidate
+    fit: dict[str, dict[str, float]]
+    noise_floor: float
+    witness: float  # share of the hybrid network's learned error the named terms account for
+
+
+def _test_rmse(candidate: Candidate, samples: Samples, split: Split) -> float:
+    return rmse(candidate.fit.model, samples, split.test)
+
+
+def _fit_table(samples, split, base: Candidate, corrected: Candidate, hybrid: HybridTwin) -> dict:
+    return {
+        "base": {"val_rmse": base.val_rmse, "test_rmse": _test_rmse(base, samples, split)},
+        "corrected": {"val_rmse": corrected.val_rmse, "test_rmse": _test_rmse(corrected, samples, split)},
+        "hybrid": {"val_rmse": rmse_of(hybrid, samples, split.val), "test_rmse": rmse_of(hybrid, samples, split.test)},
+    }
+
+
+def _explained_fraction(network: torch.Tensor, named: torch.Tensor) -> float:
+    """How much of what the network learned the named terms account for: 1 − ‖Y1 − Δ‖²/‖Y1‖²."""
+    return 1.0 - (network - named).square().sum().item() / max(network.square().sum().item(), 1e-300)
+
+
+def _left_out_entry(term: str, chosen: tuple[str, ...], c: _Context, confounds: list[dict]) -> dict:
+    """The contract's ``left_out`` item of one named term, with its evidence in words."""
+    corrected = c.corrected
+    without = c.candidates.get(tuple(t for t in chosen if t != term), c.candidates[()])
+    gain = _test_rmse(without, c.samples, c.split) / c.fit["corrected"]["test_rmse"]
+    warnings = []
+    for name, value in corrected.fit.params[term].items():
+        std = corrected.fit.param_std[term][name]
+        if not math.isfinite(std) or abs(std) > POORLY_IDENTIFIED * abs(value):
+            warnings.append(f"{name} is poorly identified (std {std:.2g})")
+        if abs(corrected.fit.correlation_with_permeability[term][name]) > CORRELATED:
+            warnings.append(f"{name} is strongly correlated with K")
+    evidence = (
+        f"With {term} refitted jointly with K, the BIC falls by {without.fit.bic - corrected.fit.bic:.0f} and the "
+        f"validation RMS from {without.val_rmse * 1e9:.3g} to {corrected.val_rmse * 1e9:.3g} nN "
+        f"({corrected.val_rmse / c.noise_floor:.2f}× the noise floor); the named terms account for "
+        f"{100 * c.witness:.0f}% of the error the hybrid network learned."
+    )
+    others = [group for group in confounds if term in group["terms"][0]]
+    if others:
+        evidence += " Confounded with " + ", ".join(group["terms"][1] for group in others) + "."
+    if warnings:
+        evidence += " Warning: " + "; ".join(warnings) + "."
+    return {
+        "term": term,
+        "params": corrected.fit.params[term],
+        "param_std": corrected.fit.param_std[term],
+        "evidence": evidence,
+        "test_rmse_gain": gain,
+    }
 
 
 def summarise(d: Diagnosis, apparent: ApparentPermeability, threshold: float) -> str:

@@ -4,9 +4,9 @@ Selection, as measured to name the exact set on concealed effects: among the
 *physical* fits take the lowest BIC, then prune any term whose removal costs less
 than ``bic_margin`` BIC or less than ``heldout_margin`` of the validation RMS. BIC
 alone admits spurious terms and held-out error alone cannot split some pairs, so a
-term must pass both. Pairs are fitted only when the best single term leaves structure
-(greedy forward selection would miss pairs whose members barely help alone; fitting
-all pairs whenever a single is not enough does not).
+term must pass both. Subsets of k terms are fitted only when the best of k − 1 leaves
+structure (greedy forward selection would miss pairs whose members barely help alone;
+fitting every pair whenever a single is not enough does not).
 """
 
 from __future__ import annotations
@@ -21,16 +21,6 @@ from ptwin.diagnosis.locate import pooled_whiteness
 from ptwin.fitting.physics_fit import PhysicsFit, fit_with_starts, rmse
 from ptwin.fitting.split import Split
 from ptwin.physics.samples import Samples
-
-# What would tell a term apart from another that explains the same residual.
-SIGNATURES = {
-    "solid_viscosity": "a force ∝ R·U: compare base speeds a decade apart at equal depth",
-    "solid_relaxation": "a hold at constant depth (stress relaxation over tau)",
-    "pore_pressure_relaxation": "a deeper indent (tau_p grows as R²) or a hold at constant depth",
-    "strain_dependent_permeability": "a deeper indent (the effect grows with w/rho, not with speed)",
-    "cantilever_drag": "the approach before contact at each speed (drag offsets the baseline)",
-    "contact_offset": "more pre-contact baseline and a slower first contact",
-}
 
 
 @dataclass
@@ -56,7 +46,8 @@ def fit_candidates(
     progress: Callable[[str], None] = print,
     fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
 ) -> dict[tuple[str, ...], Candidate]:
-    """Fits of the base model, every single term and (when needed) every pair, on the train split.
+    """Fits of the base model, every single term and, while the best subset of k − 1 terms leaves
+    structure, every subset of k ≤ ``max_terms`` terms, on the train split.
 
     ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are.
     """
@@ -76,13 +67,13 @@ def fit_candidates(
         progress(f"  {name:<55s} BIC {fit.bic:12.1f}  val RMS {candidate.val_rmse * 1e9:7.3f} nN  ({state})")
 
     add(())
-    for term in terms:
-        add((term,))
-    singles = [c for t, c in candidates.items() if len(t) == 1 and c.fit.physical]
-    best_single = min(singles, key=lambda c: c.fit.bic, default=None)
-    if max_terms >= 2 and (best_single is None or best_single.whiteness > threshold):
-        for pair in itertools.combinations(terms, 2):
-            add(pair)
+    for size in range(1, max_terms + 1):
+        previous = [c for t, c in candidates.items() if len(t) == size - 1 and c.fit.physical]
+        best = min(previous, key=lambda c: c.fit.bic, default=None)
+        if size > 1 and best is not None and best.whiteness <= threshold:
+            break
+        for subset in itertools.combinations(terms, size):
+            add(subset)
     return candidates
 
 

@@ -1,4 +1,5 @@
-"""Checkpoints: explicit plain dicts, written atomically, loaded with ``weights_only=True``.
+"""Checkpoints: explicit plain dicts, stored through ``ptwin.files`` (atomic, checksummed,
+loaded with ``weights_only=True``).
 
 A checkpoint carries the run's configuration and the PGD basis hash; resuming under
 another configuration or basis is refused, naming the first difference.
@@ -6,16 +7,17 @@ another configuration or basis is refused, naming the first difference.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import torch
 
-FORMAT = "ptwin-checkpoint/1"
+from ptwin import files
+
+FORMAT = "ptwin-checkpoint/2"
 IGNORED_KEYS = ("ckpt_path", "cache_dir")  # where things live, not what is computed
 
 
-class CheckpointError(ValueError):
+class CheckpointError(files.StoredFileError):
     pass
 
 
@@ -28,12 +30,9 @@ def rng_states() -> dict:
 
 def save_checkpoint(path: str | Path, state: dict, config: dict, basis_hash: str) -> None:
     """Write ``state`` with its provenance; a kill at any moment leaves the previous file intact."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    payload = {"format": FORMAT, "config": config, "basis_hash": basis_hash, "rng": rng_states(), "state": state}
-    temporary = path.with_name(path.name + ".tmp")
-    torch.save(payload, temporary)
-    os.replace(temporary, path)
+    files.save(
+        path, {"format": FORMAT, "config": config, "basis_hash": basis_hash, "rng": rng_states(), "state": state}
+    )
 
 
 def _first_difference(saved, current, prefix=""):
@@ -50,16 +49,8 @@ def _first_difference(saved, current, prefix=""):
 
 def load_checkpoint(path: str | Path, config: dict, basis_hash: str) -> dict:
     """The state saved at ``path``, after checking it belongs to this configuration and basis."""
-    try:
-        payload = torch.load(path, weights_only=True)
-    except FileNotFoundError:
-        raise CheckpointError(f"ckpt_path={path}: no such file; give the path of a checkpoint.pt") from None
-    except Exception as error:
-        raise CheckpointError(
-            f"ckpt_path={path}: not a readable ptwin checkpoint ({error.__class__.__name__})"
-        ) from None
-    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise CheckpointError(f"ckpt_path={path}: not a {FORMAT} checkpoint")
+    remedy = "give the checkpoint.pt of a run, or start afresh without ckpt_path"
+    payload = files.load(path, FORMAT, remedy, label=f"ckpt_path={path}", error=CheckpointError)
     if payload["basis_hash"] != basis_hash:
         raise CheckpointError(
             f"ckpt_path={path}: written with PGD basis {payload['basis_hash'][:16]}, this run uses "

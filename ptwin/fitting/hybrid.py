@@ -16,8 +16,7 @@ from torch import nn
 from torch.func import functional_call
 
 from ptwin.fitting.lm import LevenbergMarquardt, ParameterVector
-from ptwin.fitting.physics_fit import PERMEABILITY
-from ptwin.physics.model import ForceModel
+from ptwin.physics.model import PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
 
 ACTIVATIONS = {"sigmoid": nn.Sigmoid, "tanh": nn.Tanh, "relu": nn.ReLU}
@@ -27,6 +26,16 @@ INPUTS = {
     "velocity": lambda s: s.velocity,
     "time": lambda s: s.time,
 }
+
+
+def check_network(inputs: Sequence[str], activation: str) -> None:
+    """ValueError naming the fix, unless ``inputs`` are names of ``INPUTS`` and ``activation`` of ``ACTIVATIONS``."""
+    unknown = set(inputs) - set(INPUTS)
+    if unknown or activation not in ACTIVATIONS:
+        raise ValueError(
+            f"model: inputs must be among {sorted(INPUTS)} and activation among {sorted(ACTIVATIONS)}; "
+            f"got inputs {list(inputs)}, activation {activation!r}"
+        )
 
 
 class ErrorNetwork(nn.Module):
@@ -47,12 +56,7 @@ class ErrorNetwork(nn.Module):
         generator: torch.Generator,
     ):
         super().__init__()
-        unknown = set(inputs) - set(INPUTS)
-        if unknown or activation not in ACTIVATIONS:
-            raise ValueError(
-                f"model: inputs must be among {sorted(INPUTS)} and activation among {sorted(ACTIVATIONS)}; "
-                f"got inputs {list(inputs)}, activation {activation!r}"
-            )
+        check_network(inputs, activation)
         self.inputs = list(inputs)
         features = self.features(samples)[index]
         self.register_buffer("mean", features.mean(0))

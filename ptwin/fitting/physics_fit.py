@@ -14,11 +14,9 @@ import torch
 from torch.func import functional_call
 
 from ptwin.fitting.lm import LevenbergMarquardt, ParameterVector, covariance
-from ptwin.physics.model import ForceModel
+from ptwin.physics.model import PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
-
-PERMEABILITY = "fluid.log_permeability"
 
 
 @dataclass

@@ -1,7 +1,8 @@
 """Stage 1 (paper §5.1): the apparent permeability K(w) of every sample, by Newton.
 
-For each sample, F = F_el(w; K) + F_D(U, K, R, H) is solved for K (Newton on log K,
-all samples at once; the elastic law is self-consistent, so K enters it too). Where
+For each sample, F = F_el(w; K) + F_D(U, K, R, H) of the base model is solved for K
+(Newton on log K, all samples at once; the elastic law is self-consistent, so K enters
+it too). Where
 the measured force does not exceed the elastic law by a fluid force of the right
 sign there is no positive root: the sample gets NaN and is counted, never dropped
 silently. The plateau (deeper part of each curve) gives one K per speed; a weighted
@@ -17,9 +18,7 @@ import numpy as np
 import torch
 from torch.func import jvp
 
-from ptwin.physics.elastic import ReferenceElasticLaw
-from ptwin.physics.fluid_force import FluidForce
-from ptwin.physics.model import smooth_contact_radius
+from ptwin.physics.model import ForceModel
 from ptwin.physics.samples import Samples
 
 
@@ -39,22 +38,14 @@ class ApparentPermeability:
 
 
 def apparent_permeability(
-    elastic: ReferenceElasticLaw,
-    fluid: FluidForce,
-    samples: Samples,
-    probe_radius: float,
-    sample_thickness: float,
-    start: float,
-    iterations: int = 40,
-    plateau_from: float = 0.5,
+    base: ForceModel, samples: Samples, start: float, iterations: int = 40, plateau_from: float = 0.5
 ) -> ApparentPermeability:
-    """Newton from K = ``start`` [m²]; the plateau is the part deeper than ``plateau_from`` × the curve's depth."""
-    radius = smooth_contact_radius(samples.depth, probe_radius)
-    height = sample_thickness - samples.depth
+    """Newton from K = ``start`` [m²] on the base model ``base`` (no terms); the plateau is the part
+    deeper than ``plateau_from`` × the curve's depth."""
 
     def residual(log_k):
         k = log_k.exp()
-        return samples.force - elastic(samples.depth, k) - fluid.evaluate(samples.velocity, radius, height, k)
+        return samples.force - base.elastic(samples.depth, k) - base.rate_forces(samples, None, k)["fluid"]
 
     log_k = torch.full_like(samples.force, math.log(start))
     with torch.no_grad():

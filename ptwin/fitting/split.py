@@ -43,7 +43,7 @@ def split_samples(
     if mode != "curve":
         raise ValueError(f"split.mode must be 'random' or 'curve', got {mode!r}")
     if held_out_curve is None:
-        held_out_curve = samples.curve_ids[int(samples.base_speed.argmax())]
+        held_out_curve = samples.curve_ids[int(samples.curve[samples.base_speed.argmax()])]
     if held_out_curve not in samples.curve_ids:
         raise ValueError(
             f"split.held_out_curve {held_out_curve!r} is not a fitted curve; pick one of {samples.curve_ids}"

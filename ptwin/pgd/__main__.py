@@ -1,29 +1,33 @@
-"""python -m ptwin.pgd pgd=<default|precise|paper> [pgd.coordinates=paper] out=<file>
+"""python -m ptwin.pgd pgd=<default|precise|paper> [pgd.coordinates=paper] [out=<file>]
 
-Builds a basis, saves it, prints modes, time, peak memory and its errors against the
-closed form and against a direct solve of the same discrete problem."""
+Builds a basis, saves it (by default into the cache, where train.py looks for it),
+prints modes, time, peak memory and its errors against the closed form and against a
+direct solve of the same discrete problem."""
 
 from __future__ import annotations
 
 import hydra
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
+from ptwin.app import register, typed, user_errors_exit_2
 from ptwin.pgd.build import build_basis
-from ptwin.pgd.config import PGDConfig
-from ptwin.pgd.verify import verify
-from ptwin.schema import register
+from ptwin.pgd.cache import cache_path
+from ptwin.physics.fluid_accuracy import verify
 
 register()
 
 
 @hydra.main(version_base="1.3", config_path="../../configs", config_name="pgd_build")
 def main(cfg: DictConfig) -> None:
-    config = PGDConfig.from_dict(OmegaConf.to_container(cfg.pgd, resolve=True))
+    with user_errors_exit_2():
+        settings = typed(cfg)
+    config = settings.pgd
+    out = settings.out or cache_path(config, settings.cache_dir)
     basis = build_basis(config)
-    basis.save(cfg.out)
+    basis.save(out)
     stats = basis.stats
     print(
-        f"saved {cfg.out}: {stats['modes_per_mesh']} modes, {stats['seconds']:.1f} s, "
+        f"saved {out}: {stats['modes_per_mesh']} modes, {stats['seconds']:.1f} s, "
         f"peak memory {stats['peak_rss_bytes'] / 2**30:.2f} GiB, force ranks {stats['force_ranks']}"
     )
     report = verify(basis)

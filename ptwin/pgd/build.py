@@ -30,15 +30,15 @@ def build_basis(config: PGDConfig, progress: Callable[[str], None] = print) -> B
     for rings, weight in zip(levels, weights):
         problem = build_problem(config, rings=rings)
         progress(
-            f"PGD [{config.coordinates} coordinates] on {problem.dims[0].size} in-plane x "
-            f"{problem.dims[1].size} thickness nodes ({rings} rings)"
+            f"PGD [{config.coordinates} coordinates] on {problem.dims.plane.size} in-plane x "
+            f"{problem.dims.thickness.size} thickness nodes ({rings} rings)"
         )
         solution = enrich(problem.dims, problem.n_terms, config.enrichment, progress, _force_at_probes(problem))
-        beta, factors = force_modes(solution, problem.dims[0].load, problem.dims[4].nodes)
+        beta, factors = force_modes(solution, problem.dims)
         betas.append(weight * beta)
         parameters.append(factors)
         fine = fine or (problem, solution)
-    names = [dim.name for dim in fine[0].dims[2:]]
+    names = [dim.name for dim in fine[0].dims.parameters]
     joined = [torch.cat([p[d] for p in parameters], dim=1) for d in range(len(names))]
     force = recompress(names, torch.cat(betas), joined)
     stats = {
@@ -63,11 +63,11 @@ def _force_at_probes(problem, count: int = 64, seed: int = 0):
     """The force at fixed random grid points of the parameter box: the output whose
     change per mode is the stopping residual."""
     generator = torch.Generator().manual_seed(seed)
-    index = [torch.randint(dim.size, (count,), generator=generator) for dim in problem.dims[2:]]
+    index = [torch.randint(dim.size, (count,), generator=generator) for dim in problem.dims.parameters]
 
     def output(factors, amplitudes):
-        plane, thickness, *parameters = factors
-        beta = force_amplitudes(amplitudes, plane, thickness, problem.dims[0].load)
+        plane, thickness, *parameters = factors  # in the order of ``Dimensions``
+        beta = force_amplitudes(amplitudes, plane, thickness, problem.dims.plane.load)
         return (beta * torch.stack([p[i] for p, i in zip(parameters, index)]).prod(dim=0)).sum(dim=1)
 
     return output

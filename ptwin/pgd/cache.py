@@ -1,20 +1,34 @@
-"""Reuse a built basis keyed by its config hash; build it only when absent."""
+"""Reuse a built basis keyed by its config hash; build it when absent or unusable."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
 
+from ptwin.pgd.basis import Basis, BasisError
 from ptwin.pgd.build import build_basis
 from ptwin.pgd.config import PGDConfig
 
 
-def cached_basis(config: PGDConfig, cache_dir: str | Path, progress: Callable[[str], None] = print) -> Path:
-    """Path of the basis for ``config`` in ``cache_dir``, building it on first use."""
-    path = Path(cache_dir) / f"pgd-{config.coordinates}-{config.hash()[:16]}.pt"
+def cache_path(config: PGDConfig, cache_dir: str | Path) -> Path:
+    """Where the basis of ``config`` lives in ``cache_dir``."""
+    return Path(cache_dir) / f"pgd-{config.coordinates}-{config.hash()[:16]}.pt"
+
+
+def cached_basis(config: PGDConfig, cache_dir: str | Path, progress: Callable[[str], None] = print) -> Basis:
+    """The basis for ``config`` from ``cache_dir``, built on first use; a damaged or outdated
+    cached file is rebuilt, with one line saying so."""
+    path = cache_path(config, cache_dir)
     if path.is_file():
-        progress(f"reusing PGD basis {path}")
-        return path
-    progress(f"no cached PGD basis for this config: building {path}")
-    build_basis(config, progress).save(path)
-    return path
+        try:
+            basis = Basis.load(path)
+        except BasisError as error:
+            progress(f"cached PGD basis unusable ({error}): rebuilding it")
+        else:
+            progress(f"reusing PGD basis {path}")
+            return basis
+    else:
+        progress(f"no cached PGD basis for this config: building {path}")
+    basis = build_basis(config, progress)
+    basis.save(path)
+    return basis

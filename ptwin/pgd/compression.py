@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import torch
 
 from ptwin.pgd.enrichment import SeparatedSolution
+from ptwin.pgd.problem import Dimensions
 
 
 @dataclass
@@ -32,12 +33,13 @@ def force_amplitudes(amplitudes, plane, thickness, top_integral: torch.Tensor) -
     return amplitudes * (top_integral @ plane) * thickness[-1]
 
 
-def force_modes(solution: SeparatedSolution, top_integral: torch.Tensor, radius_nodes: torch.Tensor):
-    """(β, parameter factors) of the force of one separated pressure solution."""
-    plane, thickness, *parameters = solution.factors
-    beta = force_amplitudes(solution.amplitudes, plane, thickness, top_integral)
-    parameters[2] = parameters[2] * radius_nodes[:, None] ** 2
-    return beta, parameters
+def force_modes(solution: SeparatedSolution, dims: Dimensions):
+    """(β, parameter factors in the order of ``dims.parameters``) of the force of one
+    separated pressure solution: F/μ = R²·∫_top P, so the radius factor takes R²."""
+    factors = dict(zip(solution.names, solution.factors))
+    beta = force_amplitudes(solution.amplitudes, factors["plane"], factors["thickness"], dims.plane.load)
+    factors["contact_radius"] = factors["contact_radius"] * dims.contact_radius.nodes[:, None] ** 2
+    return beta, [factors[dim.name] for dim in dims.parameters]
 
 
 def recompress(

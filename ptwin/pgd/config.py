@@ -6,7 +6,17 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass, field
 
-from ptwin.pgd.enrichment import EnrichmentSettings
+
+@dataclass
+class EnrichmentSettings:
+    """Stopping and fixed-point controls of the greedy enrichment (``ptwin.pgd.enrichment``)."""
+
+    max_modes: int = 150
+    amplitude_tol: float = 1e-5
+    output_tol: float = 1e-7
+    fixed_point_tol: float = 1e-8
+    max_fixed_point_iterations: int = 25
+    seed: int = 0
 
 
 @dataclass
@@ -77,9 +87,17 @@ class PGDConfig:
         plain = {k: v for k, v in values.items() if k not in grids and k not in nested}
         return cls(**plain, **grids, **nested)
 
+    @property
+    def shape(self) -> str:
+        """The fourth parameter: the aspect ratio H/R (scaled coordinates) or the height H (paper)."""
+        return "aspect_ratio" if self.coordinates == "scaled" else "height"
+
     def to_dict(self) -> dict:
         return asdict(self)
 
     def hash(self) -> str:
-        """sha256 of the canonical JSON of every setting (the cache key)."""
-        return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True).encode()).hexdigest()
+        """sha256 of the canonical JSON of every setting that shapes the basis (the cache key);
+        the grid of the coordinate system not in use is left out."""
+        unused = "height" if self.coordinates == "scaled" else "aspect_ratio"
+        used = {k: v for k, v in self.to_dict().items() if k != unused}
+        return hashlib.sha256(json.dumps(used, sort_keys=True).encode()).hexdigest()

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import torch
 
+from ptwin.pgd.config import EnrichmentSettings
 from ptwin.pgd.dimensions import BandedDimension, DiagonalDimension
 
 Dimension = DiagonalDimension | BandedDimension
@@ -32,18 +33,6 @@ class SeparatedSolution:
     @property
     def modes(self) -> int:
         return self.amplitudes.numel()
-
-
-@dataclass
-class EnrichmentSettings:
-    """Stopping and fixed-point controls of the greedy enrichment."""
-
-    max_modes: int = 150
-    amplitude_tol: float = 1e-5
-    output_tol: float = 1e-7
-    fixed_point_tol: float = 1e-8
-    max_fixed_point_iterations: int = 25
-    seed: int = 0
 
 
 def enrich(

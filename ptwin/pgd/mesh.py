@@ -19,7 +19,7 @@ def unit_disc(rings: int, ring_density: float = 6.0, edge_grading: float = 1.0):
         boundary: (N,) bool, True on the rim (P = 0 there).
     """
     if rings < 1:
-        raise ValueError(f"pgd.mesh.rings must be >= 1, got {rings}")
+        raise ValueError(f"pgd.plane.rings must be >= 1, got {rings}")
     points = [np.zeros((1, 2))]
     on_rim = [np.zeros(1, dtype=bool)]
     for k in range(1, rings + 1):

@@ -10,6 +10,7 @@ energy scale U²R³/K, so every corner of the box counts alike.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg
@@ -24,15 +25,31 @@ from ptwin.pgd.mesh import graded_thickness, unit_disc
 _ENERGY_WEIGHT = {"velocity": -2.0, "permeability": 1.0, "contact_radius": -3.0, "height": 0.0, "aspect_ratio": 0.0}
 
 
+class Dimensions(NamedTuple):
+    """The six factor spaces of the separated Darcy problem, in the operator's order."""
+
+    plane: DiagonalDimension  # the unit disc, in the eigenbasis of its pencil
+    thickness: BandedDimension  # φ = z/H
+    velocity: ParameterDimension
+    permeability: ParameterDimension
+    contact_radius: ParameterDimension
+    shape: ParameterDimension  # aspect ratio H/R (scaled coordinates) or height H (paper)
+
+    @property
+    def parameters(self) -> tuple[ParameterDimension, ...]:
+        """The four parameter dimensions, in the order of the basis's force functions."""
+        return (self.velocity, self.permeability, self.contact_radius, self.shape)
+
+
 @dataclass
 class DiscreteProblem:
     """The separated operator plus what is needed to read forces and fields back.
 
     The in-plane dimension lives in the eigenbasis of its pencil: a factor a there is
-    the nodal field ``plane_modes @ a``, and its top integral is ``dims[0].load @ a``.
+    the nodal field ``plane_modes @ a``, and its top integral is ``dims.plane.load @ a``.
     """
 
-    dims: list
+    dims: Dimensions
     n_terms: int
     plane_nodes: np.ndarray  # (N, 2) all in-plane nodes
     plane_free: np.ndarray  # (N,) bool, not on the Dirichlet rim
@@ -83,7 +100,7 @@ def build_problem(config: PGDConfig, rings: int | None = None) -> DiscreteProble
         radius = _parameter("contact_radius", config.contact_radius, [one, lambda r: r**2], lambda r: r**2)
         shape = _parameter("height", config.height, [lambda h: h, lambda h: 1 / h], one)
     return DiscreteProblem(
-        [plane, thickness, velocity, permeability, radius, shape],
+        Dimensions(plane, thickness, velocity, permeability, radius, shape),
         2,
         nodes,
         free,

@@ -47,7 +47,7 @@ def discrete_force_coefficient(problem: DiscreteProblem, aspect_ratios) -> np.nd
     exact discrete solution is one tridiagonal φ solve per in-plane mode λ, with
     coefficients (x·λ, 1/x), weighted by the squared top integral of that mode.
     """
-    plane, thickness = problem.dims[:2]
+    plane, thickness = problem.dims.plane, problem.dims.thickness
     eigenvalues, weights = plane.term_coefficients[0].tolist(), (plane.load**2).tolist()
     top = thickness.load
     return np.array(

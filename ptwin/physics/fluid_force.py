@@ -93,19 +93,21 @@ class FluidForce(nn.Module):
             raise ValueError(f"viscosity must be > 0 Pa s, got {viscosity}")
         self.coordinates = basis.config.coordinates
         self.basis_hash = basis.config_hash
-        self.names = list(basis.force.names)
+        self.names = list(basis.force.names)  # the core's order: velocity, permeability, contact_radius, shape
+        self.shape = basis.config.shape
         self.viscosity = float(viscosity)
         self.log_permeability = nn.Parameter(torch.tensor(math.log(permeability), dtype=torch.float64))
-        self.functions = nn.ModuleList(
-            LogGridFunctions(basis.grids[name][0], basis.grids[name][1], values)
-            for name, values in zip(self.names, basis.force.functions)
+        self.functions = nn.ModuleDict(
+            {
+                name: LogGridFunctions(basis.grids[name][0], basis.grids[name][1], values)
+                for name, values in zip(self.names, basis.force.functions)
+            }
         )
         self.register_buffer("core", basis.force.core)
-        for name, function in zip(self.names, self.functions):
-            if name == "contact_radius" and function.power_law is None and self.coordinates == "scaled":
-                raise ValueError("basis: the contact-radius mode is not a power law; rebuild it")
-        laws = [function.power_law for function in self.functions[:3]]
-        shape = self.functions[3]
+        if self.coordinates == "scaled" and self.functions["contact_radius"].power_law is None:
+            raise ValueError("basis: the contact-radius mode is not a power law; rebuild it")
+        laws = [self.functions[name].power_law for name in ("velocity", "permeability", "contact_radius")]
+        shape = self.functions[self.shape]
         # The fused path's law: F/μ = prefactor·U·R³/K·c(x), c one-signed.
         self._separable_prefactor = None
         if [law and law[1] for law in laws] == [1, -1, 3] and shape.rank == 1 and shape.logarithmic:
@@ -127,7 +129,7 @@ class FluidForce(nn.Module):
         """The force for an explicit permeability [m²]: a scalar, or one per point of the batch."""
         shape = torch.broadcast_shapes(velocity.shape, contact_radius.shape, height.shape)
         u, r, h = (t.expand(shape).reshape(-1) for t in (velocity, contact_radius, height))
-        smallest = self.functions[2].minimum
+        smallest = self.functions["contact_radius"].minimum
         scale = None
         below = r < smallest
         if bool(below.any()):
@@ -136,20 +138,23 @@ class FluidForce(nn.Module):
             h = torch.where(below, h * smallest / safe_r, h)
             r = torch.where(below, torch.full_like(r, smallest), r)
         last = h / r if self.coordinates == "scaled" else h
-        last = self._in_range(self.names[3], last, clamp_above=self.names[3] == "aspect_ratio")
+        last = self._in_range(self.shape, last, clamp_above=self.shape == "aspect_ratio")
         value = self._per_viscosity(u, r, last, permeability.reshape(-1))  # one K, or one per point
         return (self.viscosity * (value if scale is None else scale * value)).reshape(shape)
 
     def _per_viscosity(self, u, r, last, permeability) -> torch.Tensor:
         """F/μ on the grids (R at or above its minimum)."""
         if self._separable_prefactor is not None:
-            return _SeparableLaw.apply(u, r, last, permeability, self.functions[3], self._separable_prefactor)[0]
-        factors = [
-            self.functions[0](u),
-            self.functions[1](permeability),
-            self.functions[2](self._in_range("contact_radius", r)),
-            self.functions[3](last),
-        ]
+            return _SeparableLaw.apply(u, r, last, permeability, self.functions[self.shape], self._separable_prefactor)[
+                0
+            ]
+        values = {
+            "velocity": u,
+            "permeability": permeability,
+            "contact_radius": self._in_range("contact_radius", r),
+            self.shape: last,
+        }
+        factors = [self.functions[name](values[name]) for name in self.names]
         if self.core.numel() == 1:
             return self.core.reshape(()) * factors[0][:, 0] * factors[1][:, 0] * factors[2][:, 0] * factors[3][:, 0]
         # One dimension at a time, last first: the widest intermediate is (B, r0·r1·r2),
@@ -160,7 +165,7 @@ class FluidForce(nn.Module):
         return value[:, 0]
 
     def _in_range(self, name: str, values: torch.Tensor, clamp_above: bool = False) -> torch.Tensor:
-        function = self.functions[self.names.index(name)]
+        function = self.functions[name]
         if function.power_law is not None:
             return values
         low, high = values.min().item(), values.max().item()

@@ -1,4 +1,5 @@
-"""``ForceModel``: the base model F_el(w) + F_D(U, K, R, H) plus any candidate terms."""
+"""``ForceModel``: the base model F_el(w) + F_D(U, K, R, H) plus any candidate terms,
+with the self-consistent elastic law read off the reference curve."""
 
 from __future__ import annotations
 
@@ -7,11 +8,12 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
-from ptwin.physics.elastic import ReferenceElasticLaw
+from ptwin.physics.elastic import ReferenceCurve
 from ptwin.physics.fluid_force import FluidForce
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
+PERMEABILITY = "fluid.log_permeability"  # K's name among a ForceModel's parameters
 RELAXATION_PASSES = 6
 
 
@@ -26,17 +28,19 @@ def smooth_contact_radius(depth: torch.Tensor, probe_radius: float) -> torch.Ten
 class ForceModel(nn.Module):
     """Predicted force [N] of every sample: F_el(w) + F_D(U, K_eff, R, H) + terms.
 
-    ``elastic`` is the reference curve's law read without a fluid (``fluid=None``):
     ``terms`` names vocabulary terms (``ptwin.physics.terms``); ``values`` their starting
-    parameters ({term: {param: value}}). Self-consistent (default): the elastic law is the
-    reference curve minus this model's own rate-dependent forces there (F_D and every
-    term), evaluated at its depth nodes; the solid relaxation there takes a few fixed-point
-    passes (its input is the elastic force it corrects). K is ``fluid.log_permeability``.
+    parameters ({term: {param: value}}). The elastic law F_el is read off ``reference``;
+    self-consistent (default), it is the reference force minus this model's own
+    rate-dependent forces there (F_D and every term); a term acting on the elastic force
+    itself (relaxation) makes that a fixed point, iterated a few passes. With
+    ``self_consistent=False`` the reference curve is taken as purely elastic (the
+    paper's variant). ``probe_radius`` ρ and ``sample_thickness`` H0 [m]; K is
+    ``fluid.log_permeability`` (``PERMEABILITY``).
     """
 
     def __init__(
         self,
-        elastic: ReferenceElasticLaw,
+        reference: ReferenceCurve,
         fluid: FluidForce,
         probe_radius: float,
         sample_thickness: float,
@@ -49,26 +53,26 @@ class ForceModel(nn.Module):
         unknown = set(terms) - set(VOCABULARY)
         if unknown:
             raise ValueError(f"unknown term(s) {sorted(unknown)}; the vocabulary is {', '.join(VOCABULARY)}")
-        if elastic.fluid is not None:
-            # A shared parameter would be tied under torch.func.functional_call, which loses it.
-            raise ValueError(
-                "ForceModel: give the elastic law without a fluid layer (fluid=None); the model "
-                "subtracts its own rate-dependent forces from the reference curve"
-            )
         self.fluid = fluid  # first: K is then named fluid.log_permeability
-        self.elastic = elastic
+        self.reference = reference
         self.probe_radius, self.sample_thickness = probe_radius, sample_thickness
         self.terms = nn.ModuleDict({n: VOCABULARY[n](probe_radius, **values.get(n, {})) for n in terms})
         self.self_consistent = self_consistent
 
-    def rate_forces(self, samples: Samples, elastic: torch.Tensor | None) -> dict[str, torch.Tensor]:
-        """The fluid force (lagged, if a term says so) and every added term's force [N]."""
+    def rate_forces(
+        self, samples: Samples, elastic: torch.Tensor | None = None, permeability: torch.Tensor | None = None
+    ) -> dict[str, torch.Tensor]:
+        """The fluid force (lagged, if a term says so) and every added term's force [N].
+
+        ``elastic``: F_el of the samples, for terms acting on it (left out when None);
+        ``permeability``: K [m²] instead of the model's, one or one per sample.
+        """
         depth = samples.depth
         for term in self.terms.values():
             shift = term.depth_shift()
             depth = depth if shift is None else depth - shift
         radius = smooth_contact_radius(depth, self.probe_radius)
-        permeability = self.fluid.permeability
+        permeability = self.fluid.permeability if permeability is None else permeability
         for term in self.terms.values():
             factor = term.permeability_factor(depth)
             permeability = permeability if factor is None else permeability * factor
@@ -78,31 +82,40 @@ class ForceModel(nn.Module):
             fluid = fluid if lagged is None else lagged
         forces = {"fluid": fluid}
         for name, term in self.terms.items():
-            if elastic is None and name == "solid_relaxation":
-                continue
-            added = term.force(samples, radius, elastic)
+            added = term.force(samples, radius)
+            if added is None and elastic is not None:
+                added = term.elastic_force(samples, elastic)
             if added is not None:
                 forces[name] = added
         return forces
 
-    def elastic_nodes(self) -> torch.Tensor:
-        """F_el at the elastic law's depth nodes [N]."""
-        reference = self.elastic.reference_force
+    def elastic_nodes(self, permeability: torch.Tensor | None = None, nodes: torch.Tensor | None = None):
+        """F_el at the reference's depth nodes [N] (or at those indexed by ``nodes``, one K each:
+        stage 1's pointwise K(w), defined for the base model only)."""
         if not self.self_consistent:
-            return reference
-        nodes = self.elastic.node_samples()
-        unrelaxed = reference - sum(self.rate_forces(nodes, None).values())
+            return self.reference.reference_force if nodes is None else self.reference.reference_force[nodes]
+        if nodes is not None and len(self.terms):
+            raise ValueError("a per-node permeability is defined for the base model only (no terms)")
+        at = self.reference.node_samples(nodes)
+        unrelaxed = at.force - sum(self.rate_forces(at, None, permeability).values())
+        hereditary = [term for term in self.terms.values() if term.ACTS_ON_ELASTIC]
         elastic = unrelaxed
-        if "solid_relaxation" in self.terms:
-            # F_el + g·relax(F_el) = unrelaxed: a contraction (rate ≤ g), so a few passes leave O(g⁶).
-            relaxation = self.terms["solid_relaxation"]
+        if hereditary:
+            # F_el + Σ relax(F_el) = unrelaxed: a contraction (rate ≤ g), so a few passes leave O(g⁶).
             for _ in range(RELAXATION_PASSES):
-                elastic = unrelaxed - relaxation.force(nodes, None, elastic)
+                elastic = unrelaxed - sum(term.elastic_force(at, elastic) for term in hereditary)
         return elastic
+
+    def elastic(self, depth: torch.Tensor, permeability: torch.Tensor | None = None) -> torch.Tensor:
+        """F_el(depth) [N]; ``permeability``: None (the model's K) or one K [m²] per depth."""
+        if permeability is None or permeability.numel() == 1:
+            return self.reference.interpolate(self.elastic_nodes(permeability), depth)
+        index, t = self.reference.bracket(depth)
+        return self.elastic_nodes(permeability, index) * (1 - t) + self.elastic_nodes(permeability, index + 1) * t
 
     def components(self, samples: Samples) -> dict[str, torch.Tensor]:
         """{'elastic': F_el, 'fluid': F_D or F_p, term name: its added force} [N], each (S,)."""
-        elastic = self.elastic.interpolate(self.elastic_nodes(), samples.depth)
+        elastic = self.elastic(samples.depth)
         return {"elastic": elastic, **self.rate_forces(samples, elastic)}
 
     def forward(self, samples: Samples) -> torch.Tensor:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import torch
 
-from ptwin.physics.kinematics import CurveKinematics
+from ptwin.data.kinematics import CurveKinematics
 
 
 @dataclass

@@ -1,16 +1,21 @@
-"""The candidate-physics vocabulary of shared/physics-terms.md as ``nn.Module`` terms.
+"""The candidate-physics vocabulary of shared/physics-terms.md: one class per term, and
+everything about a term on its class.
 
-Each term acts on the base model through one of four hooks (see ``ForceModel``):
-``depth_shift`` (the depth every fluid quantity sees), ``permeability_factor``,
-``lag_fluid`` (replaces F_D) and ``force`` (adds a force). Parameters are raw tensors:
-log-parametrised where positivity is the physics (M, tau), plain where the sign itself
-is the evidence (gamma, g, m, b, delta) — a fit that lands outside the physical range
-is then *seen* and rejected by ``violation``, not hidden by a constraint.
+A term acts on the base model through hooks (see ``ForceModel``): ``depth_shift`` (the
+depth every fluid quantity sees), ``permeability_factor``, ``lag_fluid`` (replaces F_D),
+``force`` (adds a rate-dependent force) and ``elastic_force`` (a hereditary transform
+of the elastic force; the self-consistent law on the reference curve then becomes a
+fixed point). Parameters are raw tensors: log-parametrised where positivity is the
+physics (M, tau), plain where the sign itself is the evidence (gamma, g, m, b, delta) —
+a fit that lands outside the physical range is then *seen* and rejected by
+``violation``, not hidden by a constraint. ``VOCABULARY`` is the registry every other
+room reads (fits, selection, report, figures, simulator, configs).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import ClassVar
 
 import torch
@@ -20,29 +25,55 @@ from ptwin.physics.recurrence import first_order_lag, relaxation_integral
 from ptwin.physics.samples import Samples
 
 
+@dataclass(frozen=True)
+class Parameter:
+    """One parameter of a term, in SI units.
+
+    ``log``: fitted as log(value) (positivity is the physics); ``minimum``: physical only
+    at or above it; ``maximum``: physical only below it.
+    """
+
+    unit: str
+    default: float
+    log: bool = False
+    minimum: float | None = None
+    maximum: float | None = None
+
+    def label(self, name: str) -> str:
+        """Axis label of a plot of this parameter, with its physical range."""
+        below = f" (< {self.minimum:g}: non-physical)" if self.minimum is not None else ""
+        return f"{name} [{self.unit}]{below}"
+
+
 class Term(nn.Module):
-    """A candidate term. ``PARAMS``: physical name → (transform 'log'|'linear', default)."""
+    """A candidate term.
+
+    Class facts: ``name`` (the contract's), ``PARAMS`` (name → ``Parameter``), ``STARTS``
+    (starting values a fit tries), ``TELL_APART`` (the experiment that separates it from
+    a term explaining the same residual), ``ACTS_ON_ELASTIC`` (its hook is ``elastic_force``).
+    """
 
     name: ClassVar[str]
-    PARAMS: ClassVar[dict[str, tuple[str, float]]]
-    NON_NEGATIVE: ClassVar[tuple[str, ...]] = ()  # parameters physical only when ≥ 0
-    STARTS: ClassVar[list[dict[str, float]]] = [{}]  # initial values tried by a fit
+    PARAMS: ClassVar[dict[str, Parameter]]
+    STARTS: ClassVar[list[dict[str, float]]] = [{}]
+    TELL_APART: ClassVar[str]
+    ACTS_ON_ELASTIC: ClassVar[bool] = False
 
     def __init__(self, probe_radius: float, **values: float):
         super().__init__()
         self.probe_radius = probe_radius
-        for name, (transform, default) in self.PARAMS.items():
-            value = float(values.get(name, default))
-            raw = math.log(value) if transform == "log" else value
+        for name, parameter in self.PARAMS.items():
+            value = float(values.get(name, parameter.default))
+            raw = math.log(value) if parameter.log else value
             self.register_parameter(self.raw_name(name), nn.Parameter(torch.tensor(raw, dtype=torch.float64)))
 
     @classmethod
     def raw_name(cls, name: str) -> str:
-        return f"log_{name}" if cls.PARAMS[name][0] == "log" else name
+        return f"log_{name}" if cls.PARAMS[name].log else name
 
     def value(self, name: str) -> torch.Tensor:
         raw = getattr(self, self.raw_name(name))
-        return raw.exp() if self.PARAMS[name][0] == "log" else raw
+        return raw.exp() if self.PARAMS[name].log else raw
 
     def values(self) -> dict[str, float]:
         return {name: self.value(name).item() for name in self.PARAMS}
@@ -50,14 +81,20 @@ class Term(nn.Module):
     def physical_std(self, raw_std: dict[str, float]) -> dict[str, float]:
         """Standard deviations of the physical values from those of the raw parameters (delta method)."""
         return {
-            name: raw_std[self.raw_name(name)] * (self.value(name).item() if transform == "log" else 1.0)
-            for name, (transform, _) in self.PARAMS.items()
+            name: raw_std[self.raw_name(name)] * (self.value(name).item() if parameter.log else 1.0)
+            for name, parameter in self.PARAMS.items()
         }
 
     def violation(self) -> str | None:
         """Why the fitted values are not physical, or None."""
-        negative = [f"{name} < 0" for name in self.NON_NEGATIVE if self.value(name) < 0]
-        return "; ".join(negative) or None
+        reasons = []
+        for name, parameter in self.PARAMS.items():
+            value = self.value(name).item()
+            if parameter.minimum is not None and value < parameter.minimum:
+                reasons.append(f"{name} < {parameter.minimum:g}")
+            if parameter.maximum is not None and value >= parameter.maximum:
+                reasons.append(f"{name} ≥ {parameter.maximum:g}")
+        return "; ".join(reasons) or None
 
     def depth_shift(self) -> torch.Tensor | None:
         return None
@@ -68,7 +105,10 @@ class Term(nn.Module):
     def lag_fluid(self, fluid_force, samples: Samples, radius, permeability, viscosity) -> torch.Tensor | None:
         return None
 
-    def force(self, samples: Samples, radius: torch.Tensor, elastic: torch.Tensor) -> torch.Tensor | None:
+    def force(self, samples: Samples, radius: torch.Tensor) -> torch.Tensor | None:
+        return None
+
+    def elastic_force(self, samples: Samples, elastic: torch.Tensor) -> torch.Tensor | None:
         return None
 
 
@@ -76,10 +116,10 @@ class SolidViscosity(Term):
     """Kelvin–Voigt viscous network: + π γ R U (gamma [Pa s])."""
 
     name = "solid_viscosity"
-    PARAMS = {"gamma": ("linear", 0.0)}
-    NON_NEGATIVE = ("gamma",)
+    PARAMS = {"gamma": Parameter("Pa s", 0.0, minimum=0.0)}
+    TELL_APART = "a force ∝ R·U: compare base speeds a decade apart at equal depth"
 
-    def force(self, samples, radius, elastic):
+    def force(self, samples, radius):
         return math.pi * self.value("gamma") * radius * samples.velocity
 
 
@@ -87,11 +127,12 @@ class SolidRelaxation(Term):
     """Standard-linear-solid network: + g ∫ exp(−(t−s)/tau) dF_el/ds ds (g [–], tau [s])."""
 
     name = "solid_relaxation"
-    PARAMS = {"g": ("linear", 0.1), "tau": ("log", 1.0)}
-    NON_NEGATIVE = ("g",)
+    PARAMS = {"g": Parameter("–", 0.1, minimum=0.0), "tau": Parameter("s", 1.0, log=True)}
     STARTS = [{"tau": tau} for tau in (1e-2, 1e-1, 1.0, 10.0)]
+    TELL_APART = "a hold at constant depth (stress relaxation over tau)"
+    ACTS_ON_ELASTIC = True
 
-    def force(self, samples, radius, elastic):
+    def elastic_force(self, samples, elastic):
         tau = self.value("tau").expand_as(elastic)
         return self.value("g") * relaxation_integral(elastic, tau, samples.time, samples.start)
 
@@ -100,8 +141,9 @@ class PorePressureRelaxation(Term):
     """Finite drainage: F_D → F_p, tau_p dF_p/dt + F_p = F_D, tau_p = μR²/(K M) (M [Pa])."""
 
     name = "pore_pressure_relaxation"
-    PARAMS = {"M": ("log", 1.0e5)}
+    PARAMS = {"M": Parameter("Pa", 1.0e5, log=True)}
     STARTS = [{"M": m} for m in (1e3, 1e4, 1e5, 1e6)]
+    TELL_APART = "a deeper indent (tau_p grows as R²) or a hold at constant depth"
 
     def lag_fluid(self, fluid_force, samples, radius, permeability, viscosity):
         relaxation_time = viscosity * radius**2 / (permeability * self.value("M"))
@@ -112,8 +154,8 @@ class StrainDependentPermeability(Term):
     """K → K·exp(−m w/ρ) (m [–])."""
 
     name = "strain_dependent_permeability"
-    PARAMS = {"m": ("linear", 0.0)}
-    NON_NEGATIVE = ("m",)
+    PARAMS = {"m": Parameter("–", 0.0, minimum=0.0)}
+    TELL_APART = "a deeper indent (the effect grows with w/rho, not with speed)"
 
     def permeability_factor(self, depth):
         return torch.exp(-self.value("m") * depth.clamp(min=0.0) / self.probe_radius)
@@ -123,10 +165,10 @@ class CantileverDrag(Term):
     """Hydrodynamic drag on the cantilever: + b · base_speed (b [N s/m])."""
 
     name = "cantilever_drag"
-    PARAMS = {"b": ("linear", 0.0)}
-    NON_NEGATIVE = ("b",)
+    PARAMS = {"b": Parameter("N s/m", 0.0, minimum=0.0)}
+    TELL_APART = "the approach before contact at each speed (drag offsets the baseline)"
 
-    def force(self, samples, radius, elastic):
+    def force(self, samples, radius):
         return self.value("b") * samples.base_speed
 
 
@@ -134,7 +176,8 @@ class ContactOffset(Term):
     """The recorded contact point is off by delta: the fluid sees depth w − delta (delta [m])."""
 
     name = "contact_offset"
-    PARAMS = {"delta": ("linear", 0.0)}
+    PARAMS = {"delta": Parameter("m", 0.0)}
+    TELL_APART = "more pre-contact baseline and a slower first contact"
 
     def violation(self):
         limit = self.probe_radius / 4

@@ -12,6 +12,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from ptwin.fitting.split import Split  # noqa: E402
+from ptwin.physics.terms import VOCABULARY  # noqa: E402
+
 NANO, MICRO = 1e9, 1e6
 
 
@@ -42,31 +45,68 @@ def _per_speed(samples, index, series: dict, ylabel: str, title: str, residual=F
     return figure
 
 
-def save_figures(
-    output_dir: Path, samples, split, base, viscous_per_speed, apparent, twin, diagnosis, corrected_per_speed
-):
-    """Write every figure as PNG into ``output_dir``; returns {name: figure} for TensorBoard."""
-    index = torch.cat([split.train, split.val, split.test]).sort().values
-    with torch.no_grad():
-        base_force = base.model(samples)
-        physics, correction = twin(samples)
-    figures = {}
-    figures["fig3_curves_base_model"] = _per_speed(
-        samples, index, {"elastic + Darcy": base_force}, "force [nN]", "Measured curves and the base model"
-    )
+def save_figures(output_dir: Path, samples, split, identification, twin, diagnosis, corrected_per_curve):
+    """Write every figure as PNG into ``output_dir``; returns {name: figure} for TensorBoard.
 
+    ``identification``: stages 1–2 (``base``, ``apparent``, ``viscous_per_curve``); ``twin``: the hybrid
+    twin; ``corrected_per_curve``: K per curve of the corrected model, or None.
+    """
+    base, apparent = identification.base, identification.apparent
+    with torch.no_grad():  # evaluated where the models live, plotted from the CPU
+        base_force = base.model(samples).cpu()
+        physics, correction = (force.cpu() for force in twin(samples))
+        corrected = diagnosis.corrected.fit.model(samples).cpu() if diagnosis is not None else None
+    samples = samples.to("cpu")
+    split = Split(*(part.cpu() for part in (split.train, split.val, split.test)))
+    index = torch.cat([split.train, split.val, split.test]).sort().values
+    figures = {
+        "fig3_curves_base_model": _per_speed(
+            samples, index, {"elastic + Darcy": base_force}, "force [nN]", "Measured curves and the base model"
+        ),
+        "fig4_apparent_permeability_depth": _apparent_against_depth(samples, index, apparent),
+        "fig5_permeability_speed": _permeability_against_speed(apparent, base, corrected_per_curve),
+        "fig6_viscosity_per_speed": _viscous_per_speed(apparent, identification.viscous_per_curve),
+        "fig7_hybrid_fit": _per_speed(
+            samples, index, {"hybrid twin": physics + correction}, "force [nN]", "Measured curves and the hybrid twin"
+        ),
+        "fig8_error_vs_network": _error_against_network(samples, split, index, physics, correction),
+        "fig9_residuals": _per_speed(
+            samples,
+            index,
+            {"base": base_force, "hybrid": physics + correction},
+            "residual [nN]",
+            "Residuals of the base model and the hybrid twin",
+            residual=True,
+        ),
+    }
+    if diagnosis is not None:
+        figures.update(_diagnosis_figures(samples, index, base_force, correction, corrected, diagnosis.chosen))
+    for name, figure in figures.items():
+        figure.savefig(output_dir / f"{name}.png", dpi=110)
+        plt.close(figure)
+    return figures
+
+
+def _apparent_against_depth(samples, index, apparent):
     figure, ax = plt.subplots(figsize=(7, 4.5))
+    permeability = apparent.permeability.cpu()
     for curve, _, mine in _curves(samples, index):
-        ax.semilogy(samples.depth[mine].numpy() * MICRO, apparent.permeability[mine].numpy(), ".", ms=1.5, label=curve)
+        ax.semilogy(samples.depth[mine].numpy() * MICRO, permeability[mine].numpy(), ".", ms=1.5, label=curve)
     ax.set_xlabel("depth w [µm]")
     ax.set_ylabel("apparent K [m²]")
     ax.set_title("Pointwise apparent permeability (Newton per sample)")
     ax.legend(markerscale=6)
-    figures["fig4_apparent_permeability_depth"] = figure
+    return figure
 
+
+def _speeds(apparent) -> np.ndarray:
+    return np.array([row["base_speed"] for row in apparent.plateau.values()])
+
+
+def _permeability_against_speed(apparent, base, corrected_per_curve):
     figure, ax = plt.subplots(figsize=(6, 4))
     rows = list(apparent.plateau.values())
-    speeds = np.array([r["base_speed"] for r in rows])
+    speeds = _speeds(apparent)
     ax.errorbar(
         speeds * MICRO,
         [r["mean"] for r in rows],
@@ -74,11 +114,11 @@ def save_figures(
         fmt="o",
         label="plateau K, base model",
     )
-    if corrected_per_speed:
+    if corrected_per_curve:
         ax.errorbar(
             speeds * MICRO,
-            [f.permeability for f in corrected_per_speed.values()],
-            yerr=[f.permeability_std for f in corrected_per_speed.values()],
+            [f.permeability for f in corrected_per_curve.values()],
+            yerr=[f.permeability_std for f in corrected_per_curve.values()],
             fmt="s",
             label="K per speed, corrected model",
         )
@@ -90,30 +130,35 @@ def save_figures(
     ax.set_title(f"K against speed: slope {apparent.slope:.2g} ± {apparent.slope_std:.1g} m²/decade")
     ax.legend(fontsize=7)
     figure.tight_layout()
-    figures["fig5_permeability_speed"] = figure
+    return figure
 
+
+def _viscous_per_speed(apparent, fits):
+    """Stage 2 per curve: the viscous term's parameter and K against speed."""
+    term = next(iter(fits.values())).terms[0]
+    parameter, description = next(iter(VOCABULARY[term].PARAMS.items()))
+    speeds = _speeds(apparent)
     figure, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.8))
-    fits = list(viscous_per_speed.values())
+    fits = list(fits.values())
     ax1.errorbar(
         speeds * MICRO,
-        [f.params["solid_viscosity"]["gamma"] for f in fits],
-        yerr=[f.param_std["solid_viscosity"]["gamma"] for f in fits],
+        [f.params[term][parameter] for f in fits],
+        yerr=[f.param_std[term][parameter] for f in fits],
         fmt="o",
     )
     ax1.axhline(0, color="red", lw=0.8)
-    ax1.set_ylabel("gamma [Pa s] (< 0: non-physical)")
+    ax1.set_ylabel(description.label(parameter))
     ax2.plot(speeds * MICRO, [f.permeability for f in fits], "o")
     ax2.set_ylabel("K [m²]")
     for ax in (ax1, ax2):
         ax.set_xscale("log")
         ax.set_xlabel("base speed [µm/s]")
-    figure.suptitle("(K, gamma) per speed, Gauss–Newton with the viscous term")
+    figure.suptitle(f"(K, {parameter}) per speed, Gauss–Newton with {term}")
     figure.tight_layout()
-    figures["fig6_viscosity_per_speed"] = figure
+    return figure
 
-    figures["fig7_hybrid_fit"] = _per_speed(
-        samples, index, {"hybrid twin": physics + correction}, "force [nN]", "Measured curves and the hybrid twin"
-    )
+
+def _error_against_network(samples, split, index, physics, correction):
     figure, ax = plt.subplots(figsize=(5, 5))
     error = samples.force - physics
     for name, part in (("train", split.train), ("val", split.val), ("test", split.test)):
@@ -124,21 +169,7 @@ def save_figures(
     ax.set_ylabel("network output Y1 [nN]")
     ax.set_title("What the network learned")
     ax.legend(markerscale=6)
-    figures["fig8_error_vs_network"] = figure
-    figures["fig9_residuals"] = _per_speed(
-        samples,
-        index,
-        {"base": base_force, "hybrid": physics + correction},
-        "residual [nN]",
-        "Residuals of the base model and the hybrid twin",
-        residual=True,
-    )
-    if diagnosis is not None:
-        figures.update(_diagnosis_figures(samples, index, base_force, correction, diagnosis))
-    for name, figure in figures.items():
-        figure.savefig(output_dir / f"{name}.png", dpi=110)
-        plt.close(figure)
-    return figures
+    return figure
 
 
 def _residual_map(ax, samples, index, residual, title, bins=24):
@@ -156,11 +187,9 @@ def _residual_map(ax, samples, index, residual, title, bins=24):
     return image
 
 
-def _diagnosis_figures(samples, index, base_force, correction, diagnosis):
+def _diagnosis_figures(samples, index, base_force, correction, corrected, chosen):
     figures = {}
-    with torch.no_grad():
-        corrected = diagnosis.corrected.fit.model(samples)
-    label = " + ".join(diagnosis.chosen) or "no term accepted"
+    label = " + ".join(chosen) or "no term accepted"
     figures["diagnosis_curves"] = _per_speed(
         samples,
         index,

@@ -26,24 +26,26 @@ import pandas as pd
 import torch
 from scipy.integrate import solve_ivp
 
+from ptwin.data.kinematics import contact_radius
 from ptwin.data.recordings import Meta
 from ptwin.pgd.reference import force_coefficient
 from ptwin.physics.elastic import hertz_force, hertz_stiffness
 from ptwin.physics.fluid_force import FluidForce
-from ptwin.physics.kinematics import contact_radius
+from ptwin.physics.terms import VOCABULARY
 
-TERMS = {
-    "solid_viscosity": ("gamma",),
-    "solid_relaxation": ("g", "tau"),
-    "pore_pressure_relaxation": ("M",),
-    "strain_dependent_permeability": ("m",),
-    "cantilever_drag": ("b",),
-    "contact_offset": ("delta",),
-}
+# The vocabulary terms this simulator conceals (each is integrated below), their parameters from the term classes.
+SIMULATED = (
+    "solid_viscosity",
+    "solid_relaxation",
+    "pore_pressure_relaxation",
+    "strain_dependent_permeability",
+    "cantilever_drag",
+    "contact_offset",
+)
 # Effects the vocabulary does not know, for benchmarks of the diagnosis's honesty:
 # force_drift is an instrument drift of the recorded force, rate·t [N/s].
 OUTSIDE_VOCABULARY = {"force_drift": ("rate",)}
-EFFECTS = {**TERMS, **OUTSIDE_VOCABULARY}
+EFFECTS = {**{name: tuple(VOCABULARY[name].PARAMS) for name in SIMULATED}, **OUTSIDE_VOCABULARY}
 
 
 @dataclass

@@ -11,14 +11,13 @@ file *outside* the recording folder. Example, the bundled demo:
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import asdict
 from pathlib import Path
 
 import yaml
 
 from ptwin.data.recordings import write_recordings
-from ptwin.data.simulator import EFFECTS, Experiment, simulate
+from ptwin.synth.simulator import EFFECTS, Experiment, simulate
 
 
 def parse_effects(items: list[str]) -> dict[str, dict[str, float]]:
@@ -77,7 +76,3 @@ def main(argv: list[str] | None = None) -> None:
     print(
         f"wrote {args.out} ({len(curves)} samples, curves {', '.join(dict.fromkeys(curves['curve']))}) and {args.truth}"
     )
-
-
-if __name__ == "__main__":
-    main(sys.argv[1:])

@@ -1,4 +1,5 @@
-"""Errors of a basis: against the closed form, and against the exact discrete model."""
+"""Errors of a basis as the fluid layer evaluates it: against the closed form, and
+against the exact solution of the same discrete problem."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import torch
 from ptwin.pgd.basis import Basis
 from ptwin.pgd.problem import build_problem
 from ptwin.pgd.reference import discrete_force_coefficient, force_coefficient
+from ptwin.physics.fluid_force import FluidForce
 
 
 def random_points(count: int, basis: Basis, seed: int = 0, aspect=(0.2, 1.0e4)):
@@ -42,8 +44,6 @@ def discrete_reference(basis: Basis, aspect_ratios: np.ndarray) -> np.ndarray:
 def verify(basis: Basis, points: int = 1000, discrete_points: int = 6, seed: int = 0) -> dict:
     """Max relative force errors: vs the closed form over ``points`` random points and
     vs the direct discrete solve over ``discrete_points`` random points."""
-    from ptwin.physics.fluid_force import FluidForce
-
     layer = FluidForce(basis, permeability=1e-16, viscosity=1.0)
     velocity, permeability, radius, height = random_points(points, basis, seed)
     x = height / radius

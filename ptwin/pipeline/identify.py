@@ -1,0 +1,64 @@
+"""Stages 1 and 2 of the paper's identification chain.
+
+1 (§5.1): the global K of the base model (elastic + Darcy) by LM, and the apparent
+  K(w) of every sample by Newton, with its plateau per curve and its trend with speed;
+2 (§5.2): Gauss–Newton on (K, gamma) with the viscous term, jointly and per curve.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+
+from ptwin.fitting.physics_fit import PhysicsFit, fit_physics
+from ptwin.fitting.pointwise import ApparentPermeability, apparent_permeability
+from ptwin.physics.samples import Samples
+from ptwin.physics.terms import SolidViscosity
+from ptwin.pipeline.prepare import Prepared
+from ptwin.pipeline.settings import OptimSettings
+
+VISCOUS = SolidViscosity  # the term of stage 2
+
+
+@dataclass
+class Identification:
+    base: PhysicsFit  # stage 1, on the train split
+    apparent: ApparentPermeability
+    viscous: PhysicsFit  # stage 2, on the train split
+    viscous_per_curve: dict[str, PhysicsFit]
+
+
+def identify(prepared: Prepared, optim: OptimSettings, progress: Callable[[str], None] = print) -> Identification:
+    samples, train, make_model = prepared.samples, prepared.split.train, prepared.make_model
+    iterations = optim.physics_fit.iterations
+    progress("stage 1: global K (elastic + Darcy) and the pointwise apparent K(w)")
+    base = fit_physics(make_model(), samples, train, iterations)
+    p = optim.pointwise
+    apparent = apparent_permeability(base.model, samples, base.permeability, p.iterations, p.plateau_from)
+    progress("stage 2: Gauss–Newton on (K, gamma) with the viscous term, jointly and per speed")
+    terms = (VISCOUS.name,)
+    viscous = fit_physics(make_model(terms, permeability=base.permeability), samples, train, iterations)
+    per_curve = per_curve_fits(make_model, samples, train, terms, iterations)
+    return Identification(base, apparent, viscous, per_curve)
+
+
+def per_curve_fits(
+    make_model: Callable,
+    samples: Samples,
+    index: torch.Tensor,
+    terms: tuple[str, ...],
+    iterations: int,
+    free_terms: bool = True,
+    values: dict | None = None,
+) -> dict[str, PhysicsFit]:
+    """One fit of K (and, with ``free_terms``, the terms' parameters from ``values``) per curve,
+    on the samples of ``index`` in it: {curve: PhysicsFit}."""
+    fits = {}
+    for i, curve in enumerate(samples.curve_ids):
+        model = make_model(terms, values)
+        for term in model.terms.values():
+            term.requires_grad_(free_terms)
+        fits[curve] = fit_physics(model, samples, index[samples.curve[index] == i], iterations)
+    return fits

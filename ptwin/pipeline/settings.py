@@ -1,0 +1,76 @@
+"""The typed settings of a run: one dataclass per config group (``configs/<group>/``), and
+``Settings`` for the whole of ``configs/train.yaml``. Stages take these, never Hydra's
+DictConfig; the faces register them as the configs' schema, so that a misspelt key or a
+value of the wrong type fails at the command line."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ptwin.diagnosis.diagnose import DiagnosisSettings
+from ptwin.fitting.hybrid import check_network
+from ptwin.fitting.hybrid_training import HybridSettings
+from ptwin.pgd.config import PGDConfig
+
+
+@dataclass
+class DataSettings:
+    path: str = "data/demo"  # the recording-set folder
+    smoothing: float = 0.05  # velocity window, fraction of a curve's samples
+
+
+@dataclass
+class ModelSettings:
+    """The force model's elastic law and the hybrid twin's network."""
+
+    inputs: list[str] = field(default_factory=lambda: ["depth", "base_speed"])  # depth, base_speed, velocity, time
+    hidden: int = 6
+    activation: str = "sigmoid"
+    self_consistent: bool = True  # False: the paper's purely elastic reference curve
+    elastic_nodes: int = 200  # depth nodes of the elastic law
+    elastic_smoothing: float = 0.05  # the law's local-line window, fraction of the reference curve's samples
+
+    def __post_init__(self):
+        check_network(self.inputs, self.activation)
+
+
+@dataclass
+class PointwiseSettings:
+    iterations: int = 40  # Newton steps of stage 1's K(w)
+    plateau_from: float = 0.5  # fraction of a curve's depth where its K plateau starts
+
+
+@dataclass
+class PhysicsFitSettings:
+    iterations: int = 60  # LM steps of every physics fit (global K, (K, gamma), candidates)
+
+
+@dataclass
+class OptimSettings:
+    pointwise: PointwiseSettings = field(default_factory=PointwiseSettings)
+    physics_fit: PhysicsFitSettings = field(default_factory=PhysicsFitSettings)
+    hybrid: HybridSettings = field(default_factory=HybridSettings)
+
+
+@dataclass
+class SplitSettings:
+    mode: str = "random"  # or "curve": hold out a whole curve as the test set
+    fractions: list[float] = field(default_factory=lambda: [0.70, 0.15, 0.15])
+    held_out_curve: str | None = None  # with mode=curve; default: the fastest
+
+
+@dataclass
+class Settings:
+    """Everything ``python train.py`` runs on."""
+
+    data: DataSettings = field(default_factory=DataSettings)
+    pgd: PGDConfig = field(default_factory=PGDConfig)
+    model: ModelSettings = field(default_factory=ModelSettings)
+    optim: OptimSettings = field(default_factory=OptimSettings)
+    split: SplitSettings = field(default_factory=SplitSettings)
+    diagnosis: DiagnosisSettings = field(default_factory=DiagnosisSettings)
+    seed: int = 0
+    device: str = "cpu"
+    cache_dir: str = ".cache/ptwin"  # where PGD bases are kept, keyed by their config hash
+    ckpt_path: str | None = None  # a checkpoint.pt to resume from
+    permeability: float = 2.0e-16  # starting K [m²]

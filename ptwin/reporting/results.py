@@ -1,0 +1,75 @@
+"""``results.json``: every number of the identification chain, from the stages' typed results;
+and the run's files (results.json, diagnosis.json, report.md) written together."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+
+from ptwin.diagnosis.diagnose import Diagnosis
+from ptwin.fitting.hybrid_training import HybridOutcome, HybridSettings, rmse_of
+from ptwin.fitting.physics_fit import PhysicsFit, rmse
+from ptwin.fitting.pointwise import ApparentPermeability
+from ptwin.fitting.split import Split
+from ptwin.physics.samples import Samples
+from ptwin.reporting.report import write_report
+
+
+def physics_stage(fit: PhysicsFit, samples: Samples, split: Split) -> dict:
+    """K, the terms' parameters, their standard deviations and the held-out RMSE [N] of one physics fit."""
+    reasons = "; ".join(fit.violations.values())
+    return {
+        "permeability": fit.permeability,
+        "permeability_std": fit.permeability_std,
+        "params": fit.params,
+        "param_std": fit.param_std,
+        "val_rmse": rmse(fit.model, samples, split.val),
+        "test_rmse": rmse(fit.model, samples, split.test),
+        "note": f"{reasons}: non-physical, rejected as an explanation" if reasons else "",
+    }
+
+
+def apparent_record(apparent: ApparentPermeability) -> dict:
+    return {"plateau": apparent.plateau, "slope_per_decade": apparent.slope, "slope_std": apparent.slope_std}
+
+
+def per_curve_record(fits: dict[str, PhysicsFit], term: str, parameter: str) -> dict:
+    """K and one parameter of ``term`` with its std, per curve."""
+    return {
+        curve: {
+            "permeability": f.permeability,
+            parameter: f.params[term][parameter],
+            f"{parameter}_std": f.param_std[term][parameter],
+        }
+        for curve, f in fits.items()
+    }
+
+
+def hybrid_stage(outcome: HybridOutcome, samples: Samples, split: Split, settings: HybridSettings) -> dict:
+    twin = outcome.twin
+    record = {
+        "permeability": twin.physics.fluid.permeability.item(),
+        "regularisation": outcome.regularisation,
+        "val_rmse_per_regularisation": dict(zip(map(str, settings.regularisations), outcome.val_rmse)),
+        "lm_iterations": outcome.iterations,
+        "newton_iterations": outcome.newton_iterations,
+        "val_rmse": rmse_of(twin, samples, split.val),
+        "test_rmse": rmse_of(twin, samples, split.test),  # the test set, touched once
+        "network_parameters": sum(p.numel() for p in twin.network.parameters()),
+    }
+    with torch.no_grad():
+        fitted = torch.cat([split.train, split.val, split.test])
+        record["network_rms"] = twin.network(samples)[fitted].square().mean().sqrt().item()
+    return record
+
+
+def write_outputs(output_dir: Path, results: dict, diagnosis: Diagnosis, figures: dict) -> dict:
+    """Write results.json, diagnosis.json and report.md; returns the diagnosis.json payload."""
+    payload = diagnosis.to_json()
+    text = json.dumps(payload, indent=2, allow_nan=False, default=float, ensure_ascii=False)
+    (output_dir / "diagnosis.json").write_text(text)
+    (output_dir / "results.json").write_text(json.dumps(results, indent=2, default=float))
+    write_report(output_dir, results, payload, diagnosis, figures)
+    return payload

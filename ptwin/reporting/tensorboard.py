@@ -1,0 +1,65 @@
+"""TensorBoard events and a progress bar for the hybrid twin's training (tags as in style.md:
+``loss/train``, ``loss/val``, ``param/permeability``, ``lambda``, ``damping``,
+``grad_norm/<group>``, ``lr/<group>``, the figures, and the run's hparams)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+from torch.utils.tensorboard import SummaryWriter
+from tqdm import tqdm
+
+from ptwin.fitting.hybrid import HybridTwin
+from ptwin.fitting.hybrid_training import HybridSettings, rmse_of
+from ptwin.fitting.lm import LevenbergMarquardt, Step
+from ptwin.physics.samples import Samples
+
+
+class TrainingLog:
+    """Logs each LM step of ``train_hybrid`` (pass ``on_step``); losses in units of ``noise`` [N]²."""
+
+    def __init__(
+        self,
+        folder: Path,
+        samples: Samples,
+        train: torch.Tensor,
+        val: torch.Tensor,
+        noise: float,
+        settings: HybridSettings,
+    ):
+        self.writer = SummaryWriter(folder)
+        self.samples, self.val, self.noise, self.settings = samples, val, noise, settings
+        self.train_size = train.numel()
+        total = len(settings.regularisations) * settings.iterations
+        self.bar = tqdm(total=total, desc="hybrid LM", unit="step")
+
+    def on_step(
+        self, lambda_index: int, regularisation: float, step: Step, twin: HybridTwin, solver: LevenbergMarquardt
+    ) -> None:
+        global_step = lambda_index * self.settings.iterations + step.iteration
+        self.bar.update(global_step - self.bar.n)
+        self.bar.set_postfix(λ=f"{regularisation:g}", cost=f"{step.cost:.4g}")
+        write = self.writer.add_scalar
+        groups = twin.parameter_groups()
+        names = groups["physics"] + groups["network"]
+        write("loss/train", 2 * step.cost / self.train_size, global_step)
+        write("loss/val", (rmse_of(twin, self.samples, self.val) / self.noise) ** 2, global_step)
+        write("param/permeability", twin.physics.fluid.permeability.item(), global_step)
+        write("lambda", regularisation, global_step)
+        write("damping", step.damping, global_step)
+        sizes = [p.numel() for n, p in twin.named_parameters() if n in names]
+        for group, members in groups.items():
+            gradient = torch.cat([g for g, n in zip(step.gradient.split(sizes), names) if n in members])
+            write(f"grad_norm/{group}", gradient.norm().item(), global_step)
+            write(f"lr/{group}", self.settings.learning_rate[group], global_step)
+
+    def end_training(self) -> None:
+        self.bar.close()
+
+    def close(self, figures: dict, hparams: dict, metrics: dict) -> None:
+        """Add the figures and the run's hyperparameters with their metrics, and close the event file."""
+        for name, figure in figures.items():
+            self.writer.add_figure(name, figure)
+        self.writer.add_hparams(hparams, metrics, run_name=".")
+        self.writer.close()

@@ -1,0 +1,1 @@
+"""Synthetic recording sets with known, concealed physics: the forward simulator and its CLI."""

@@ -1,0 +1,3 @@
+from ptwin.synth.cli import main
+
+main()

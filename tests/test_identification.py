@@ -1,0 +1,79 @@
+"""Stage 1's pointwise K(w), the hybrid twin's regularised Newton for K, and the splits."""
+
+import math
+
+import pytest
+import torch
+
+from ptwin.data.recordings import load_recordings, write_recordings
+from ptwin.fitting.hybrid import hybrid_residual, newton_permeability
+from ptwin.fitting.split import split_samples
+from ptwin.pipeline.identify import identify
+from ptwin.pipeline.prepare import prepare
+from tests.conftest import settings_for, simulated_set
+
+pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+TRUE_K = 2.0e-16
+
+
+@pytest.fixture(scope="module")
+def prepared(tmp_path_factory, coarse_cache):
+    folder = simulated_set(tmp_path_factory.mktemp("set"), base_speeds=(0.5e-6, 8e-6, 80e-6), samples=600)
+    recordings = load_recordings(folder)
+    curves = recordings.curves.copy()
+    # Three deep samples of v80 pushed 2 µN down, below the elastic force alone: no positive root.
+    rows = curves.index[curves["curve"] == "v80"][-30:-27]
+    curves.loc[rows, "force"] -= 2e-6
+    write_recordings(folder, recordings.meta, curves)
+    settings = settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}")
+    return settings, prepare(settings, progress=lambda line: None)
+
+
+def test_pointwise_permeability_plateaus_at_the_truth_and_counts_samples_without_root(prepared):
+    settings, p = prepared
+    apparent = identify(p, settings.optim, progress=lambda line: None).apparent
+    for curve in ("v8", "v80"):
+        assert apparent.plateau[curve]["mean"] == pytest.approx(TRUE_K, rel=0.02), curve
+    assert apparent.plateau["v8"]["without_root"] == 0
+    broken = p.samples.curve_ids.index("v80")
+    v80 = torch.nonzero((p.samples.curve == broken) & p.samples.in_contact).squeeze(1)
+    deep = v80[p.samples.depth[v80] >= 0.5 * p.samples.depth[v80].max()]
+    # Counted, never dropped: the three broken samples, and neighbours whose smoothed velocity they bent.
+    assert apparent.plateau["v80"]["without_root"] == int(torch.isnan(apparent.permeability[deep]).sum()) >= 3
+    assert torch.isnan(apparent.permeability[v80[-30:-27]]).all()
+    assert not torch.isnan(apparent.permeability[v80[-150:-80]]).any()
+    assert abs(apparent.slope) < 3 * apparent.slope_std  # K does not depend on speed here
+
+
+def test_regularised_newton_converges_k_to_the_minimum_of_the_hybrid_cost(prepared):
+    _, p = prepared
+    samples, train = p.samples, p.split.train
+    twin = p.make_model.twin(3.0e-16, 3e-10, samples, train)  # start 50% off
+    iterations = newton_permeability(twin, samples, train, 1e-2)
+    name = "physics.fluid.log_permeability"
+    vector, residual = hybrid_residual(twin, samples, train, 1e-2, [name])
+    optimum = vector.get()
+
+    def cost(log_k):
+        with torch.no_grad():
+            return 0.5 * residual(log_k).square().sum().item()
+
+    assert iterations < 30
+    for step in (-1e-3, 1e-3):
+        assert cost(optimum + step) > cost(optimum)
+    assert math.exp(optimum.item()) == pytest.approx(TRUE_K, rel=0.05)
+
+
+def test_curve_split_holds_out_the_fastest_curve_whole(prepared):
+    _, p = prepared
+    samples = p.samples
+    split = split_samples(samples, (0.7, 0.15, 0.15), "curve", None, seed=0)
+    assert split.held_out_curve == "v80"
+    fastest = samples.curve_ids.index("v80")
+    held = torch.nonzero((samples.curve == fastest) & samples.in_contact).squeeze(1)
+    assert torch.equal(split.test, held)
+    rest = torch.cat([split.train, split.val])
+    assert not (samples.curve[rest] == fastest).any()
+    assert split.train.numel() / rest.numel() == pytest.approx(0.7 / 0.85, abs=1e-3)
+    with pytest.raises(ValueError, match=r"split.held_out_curve 'v3' is not a fitted curve; pick one of"):
+        split_samples(samples, (0.7, 0.15, 0.15), "curve", "v3")

@@ -1,0 +1,49 @@
+"""A new term is one class: registered once, it is fitted, selected, reported and plotted."""
+
+import pandas as pd
+import pytest
+
+from ptwin.data.recordings import load_recordings, write_recordings
+from ptwin.physics.terms import VOCABULARY, Parameter, Term
+from tests.conftest import run, simulated_set
+
+pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+
+
+class RateStiffening(Term):
+    """A toy: + c · base_speed · w (c [N s/m²]), a force growing with speed and depth."""
+
+    name = "toy_rate_stiffening"
+    PARAMS = {"c": Parameter("N s/m²", 0.0, minimum=0.0)}
+    TELL_APART = "a toy needs no experiment"
+
+    def force(self, samples, radius):
+        return self.value("c") * samples.base_speed * samples.depth
+
+
+def test_a_toy_term_is_fitted_selected_reported_and_plotted(tmp_path, coarse_cache, monkeypatch):
+    monkeypatch.setitem(VOCABULARY, RateStiffening.name, RateStiffening)
+    truth = 20.0  # 6 nN at 80 µm/s and 4 µm: 20× the noise
+    folder = simulated_set(tmp_path / "set", base_speeds=(0.5e-6, 8e-6, 80e-6), samples=500)
+    recordings = load_recordings(folder)
+    curves, k = recordings.curves, recordings.meta.spring_constant
+    depth = (curves["z"] - curves["force"] / k).clip(lower=0.0)
+    added = truth * curves["base_speed"] * depth
+    # Force and base move together, so the recorded depth stays the simulated one.
+    concealed = curves.assign(force=curves["force"] + added, z=curves["z"] + added / k)
+    write_recordings(folder, recordings.meta, pd.DataFrame(concealed))
+
+    outcome = run(
+        folder,
+        coarse_cache,
+        tmp_path / "run",
+        f"diagnosis.terms=[solid_viscosity,{RateStiffening.name}]",
+        "optim.hybrid.regularisations=[1.0e-2]",
+        "optim.hybrid.iterations=10",
+    )
+    named = outcome.diagnosis["left_out"]
+    assert [entry["term"] for entry in named] == [RateStiffening.name]
+    assert named[0]["params"]["c"] == pytest.approx(truth, rel=0.1)
+    assert f"Left out: `{RateStiffening.name}`" in (tmp_path / "run" / "report.md").read_text()
+    title = outcome.figures["diagnosis_curves"].axes[0].get_title()
+    assert RateStiffening.name in title
