@@ -111,14 +111,15 @@ def diagnose(
     apparent: ApparentPermeability,
     settings: DiagnosisSettings,
     iterations: int,
+    noise_floor: float,
     progress: Callable[[str], None] = print,
     base_fit: PhysicsFit | None = None,
 ) -> Diagnosis:
     """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); candidate fits run
-    ``iterations`` LM steps; ``base_fit``: the base model already fitted so on ``split.train``, if any."""
+    ``iterations`` LM steps; ``noise_floor`` [N] is the run's; ``base_fit``: the base model already
+    fitted so on ``split.train``, if any."""
     s = settings
     seen = torch.cat([split.train, split.val]).sort().values
-    noise_floor = samples.noise_floor[seen].mean().item()
     progress("diagnosis: fitting the base model and the candidate terms (K refitted with each)")
     candidates = fit_candidates(
         make_model,

@@ -62,6 +62,11 @@ class Prepared:
     split: Split
     make_model: ModelFactory
 
+    @property
+    def noise_floor(self) -> float:
+        """The run's one noise floor [N]: the mean over every fitted sample of its curve's."""
+        return self.samples.noise_floor[self.samples.in_contact].mean().item()
+
 
 def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prepared:
     """Load and check the recordings, print their kinematics, get the cached basis, split."""

@@ -35,7 +35,7 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     prepared = prepare(settings, progress)
     samples, split = prepared.samples, prepared.split
     identification = identify(prepared, settings.optim, progress)
-    noise = samples.noise_floor[split.train].mean().item()
+    noise = prepared.noise_floor
     log = TrainingLog(output_dir / "tensorboard", samples, split.train, split.val, noise, settings.optim.hybrid)
     base_k = identification.base.permeability
     outcome = train_twin(prepared, base_k, noise, settings, output_dir, log.on_step, progress)
@@ -49,6 +49,7 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
         identification.apparent,
         settings.diagnosis,
         iterations,
+        noise,
         progress,
         base_fit=identification.base,
     )
