@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from ptwin.data.kinematics import contact_radius, noise_floor, smoothed_derivative
+from ptwin.data.kinematics import contact_radius, smoothed_derivative
+from ptwin.data.noise import second_difference_std
 
 
 def test_contact_radius_is_the_spherical_cap():
@@ -39,4 +40,4 @@ def test_noise_floor_recovers_white_noise_under_a_smooth_signal():
     rng = np.random.default_rng(1)
     t = np.linspace(0, 1, 4000)
     force = 5e-7 * t**1.5 + rng.normal(0, 3e-10, t.size)
-    assert noise_floor(force) == pytest.approx(3e-10, rel=0.08)
+    assert second_difference_std(force) == pytest.approx(3e-10, rel=0.08)

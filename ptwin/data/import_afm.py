@@ -8,11 +8,10 @@ kept: segment 0, cut at the deepest base position (some files, e.g. Asylum .ibw,
 store approach and retract as one segment). The force is kept raw (its baseline
 offset is evidence).
 
-Contact point, when the file has none (``contact_point: estimate`` in meta.yaml):
-a line is fitted to the force against base travel over the first 30% of the
-approach; its residual gives σ; contact is the last sample after
-which the force stays above the line + 3σ. z is the base travel from there (z < 0
-before contact). Time: the file's own, else uniform over travel / approach speed.
+z is the base travel from the contact estimated by ``ptwin.data.contact`` (z < 0
+before it); meta.yaml says ``contact_point: estimate``, so every run estimates each
+curve's contact and baseline again and refines it in the fit. Time: the file's own,
+else uniform over travel / approach speed.
 """
 
 from __future__ import annotations
@@ -25,17 +24,8 @@ import afmformats
 import numpy as np
 import pandas as pd
 
+from ptwin.data.contact import NoBaseline, estimate_baseline
 from ptwin.data.recordings import Meta, RecordingError, load_recordings, write_recordings
-
-
-def estimate_contact(travel: np.ndarray, force: np.ndarray, baseline: float = 0.3) -> int:
-    """Index of the contact sample (see the module docstring)."""
-    count = max(10, int(baseline * len(force)))
-    slope, intercept = np.polyfit(travel[:count], force[:count], 1)
-    excess = force - (slope * travel + intercept)
-    sigma = np.std(excess[:count])
-    below = np.flatnonzero(excess <= 3 * sigma)
-    return int(below[-1]) if below.size else 0
 
 
 def approach_curve(path: Path, speed: float | None, overrides: dict) -> tuple[pd.DataFrame, float, float]:
@@ -56,13 +46,18 @@ def approach_curve(path: Path, speed: float | None, overrides: dict) -> tuple[pd
     travel = np.abs(height - height[0])  # the base moves into the sample
     deepest = int(np.argmax(travel)) + 1
     travel, force = travel[:deepest], force[:deepest]
-    contact = estimate_contact(travel, force)
+    try:
+        contact_z = estimate_baseline(travel, force, spring_constant).contact_z
+    except NoBaseline as error:
+        raise RecordingError(
+            f"{path}: no baseline before contact ({error}); record the approach from further away"
+        ) from None
     if "time" in data.columns:
         time = np.asarray(data["time"], dtype=np.float64)[approach][:deepest]
         time = time - time[0]
     else:
         time = np.linspace(0.0, travel.max() / base_speed, len(travel))
-    rows = pd.DataFrame({"base_speed": float(base_speed), "time": time, "z": travel - travel[contact], "force": force})
+    rows = pd.DataFrame({"base_speed": float(base_speed), "time": time, "z": travel - contact_z, "force": force})
     return rows, float(base_speed), spring_constant
 
 

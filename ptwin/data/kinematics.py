@@ -4,19 +4,25 @@
 - ``U = dw/dt`` by local linear regression over a centred window of ``smoothing``
   (fraction of the curve's samples, ≈5%): a raw finite difference (paper eq. 7) turns
   force noise σ/k_s into a velocity noise ~σ/(k_s Δt) that invents rate effects.
-- The noise floor of each curve is estimated from its second differences (robust MAD),
-  which removes the smooth signal wherever it is; the pre-contact baseline offset
-  (mean force at z < 0, e.g. cantilever drag) is measured and kept, never subtracted.
+- The noise of each curve (``ptwin.data.noise``): measured on its pre-contact baseline
+  where there is one, else from second differences.
+- Known contact (``contact_point: known``): the pre-contact baseline offset (mean force at
+  z < 0, e.g. cantilever drag) is measured and kept, never subtracted: it is evidence.
+- Estimated contact (``contact_point: estimate``): each curve's contact point is estimated
+  and its baseline offset and tilt removed (``ptwin.data.contact``); z then counts from
+  the estimate, which the fit refines (``ContactNuisance``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
 
-from ptwin.data.recordings import RecordingSet
+from ptwin.data.contact import Baseline, NoBaseline, estimate_baseline
+from ptwin.data.noise import NoiseModel, curve_noise
+from ptwin.data.recordings import RecordingError, RecordingSet
 
 
 @dataclass
@@ -33,8 +39,15 @@ class CurveKinematics:
     velocity: np.ndarray  # U [m/s]
     height: np.ndarray  # H [m]
     in_contact: np.ndarray  # bool: samples used in fits (z ≥ 0 and w > 0)
-    noise_floor: float  # [N]
-    baseline_offset: float  # mean pre-contact force [N], nan without pre-contact samples
+    noise: NoiseModel
+    baseline_offset: float | None  # pre-contact force [N]: its mean (known contact), the removed line's at
+    # contact (estimated contact), None without pre-contact samples
+    baseline: Baseline | None  # the estimated contact and removed baseline (contact_point: estimate)
+
+    @property
+    def noise_floor(self) -> float:
+        """σ of the curve's force noise [N]."""
+        return self.noise.std
 
 
 def contact_radius(depth: np.ndarray, probe_radius: float) -> np.ndarray:
@@ -72,22 +85,32 @@ def smoothed_derivative(time: np.ndarray, values: np.ndarray, window: int) -> np
     return window_line(time, values, lo, hi, time)[1]
 
 
-def noise_floor(force: np.ndarray) -> float:
-    """σ of white force noise from second differences: MAD·1.4826/√6."""
-    second = np.diff(force, 2)
-    return float(1.4826 * np.median(np.abs(second - np.median(second))) / np.sqrt(6.0))
-
-
-def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05) -> list[CurveKinematics]:
-    """Kinematics of every curve of a recording set, in file order."""
+def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: int = 50) -> list[CurveKinematics]:
+    """Kinematics of every curve of a recording set, in file order; ``block``: the block length [samples]
+    of the noise model's variance inflation (the whiteness test's)."""
     meta = recordings.meta
     result = []
     for curve_id in recordings.curve_ids:
         rows: pd.DataFrame = recordings.curve(curve_id)
         time, z, force = (rows[c].to_numpy(dtype=np.float64) for c in ("time", "z", "force"))
+        baseline = None
+        if meta.contact_point == "estimate":
+            try:
+                baseline = estimate_baseline(z, force, meta.spring_constant)
+            except NoBaseline as error:
+                raise RecordingError(
+                    f"{recordings.path / 'curves.csv'}: curve {curve_id!r}: no baseline to estimate its contact "
+                    f"point from ({error}); record the approach from further away, or give z from the contact "
+                    f"and contact_point: known"
+                ) from None
+            z, force = baseline.remove(z, force)
         depth = z - force / meta.spring_constant
         window = max(5, int(round(smoothing * len(rows))))
         pre_contact = z < 0
+        noise = curve_noise(time, z, force, z <= 0.25 * min(z[0], 0.0), block)
+        if meta.noise_std:
+            noise = replace(noise, std=meta.noise_std, source=f"noise_std of meta.yaml; correlation: {noise.source}")
+        offset = baseline.offset if baseline else (float(force[pre_contact].mean()) if pre_contact.any() else None)
         result.append(
             CurveKinematics(
                 curve=curve_id,
@@ -100,8 +123,9 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05) -> list[
                 velocity=smoothed_derivative(time, depth, window),
                 height=meta.sample_thickness - depth,
                 in_contact=(~pre_contact) & (depth > 0),
-                noise_floor=meta.noise_std if meta.noise_std else noise_floor(force),
-                baseline_offset=float(force[pre_contact].mean()) if pre_contact.any() else float("nan"),
+                noise=noise,
+                baseline_offset=offset,
+                baseline=baseline,
             )
         )
     return result

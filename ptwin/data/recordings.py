@@ -199,6 +199,12 @@ def _check_curves(file: Path, frame: pd.DataFrame, meta: Meta) -> None:
                 f"{file}: curve {curve!r}: base_speed {speeds[0]:g} must be > 0 (approach, into the sample)"
             )
         depth = rows["z"].to_numpy() - rows["force"].to_numpy() / meta.spring_constant
+        if depth.max() >= meta.sample_thickness:
+            row = start + int(depth.argmax())
+            raise RecordingError(
+                f"{file}: row {row + 2}, curve {curve!r}: depth {depth.max():.3g} m reaches the sample thickness "
+                f"{meta.sample_thickness:.3g} m; check sample_thickness in meta.yaml (and z, force, spring constant)"
+            )
         if depth.max() > meta.probe_radius:
             row = start + int(depth.argmax())
             raise RecordingError(

@@ -43,11 +43,25 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--permeability", type=float, default=defaults.permeability, help="K [m²]")
     parser.add_argument("--effective-modulus", type=float, default=defaults.effective_modulus, help="E* [Pa]")
     parser.add_argument("--probe-radius", type=float, default=defaults.probe_radius, help="ρ [m]")
+    parser.add_argument("--spring-constant", type=float, default=defaults.spring_constant, help="k_s [N/m]")
     parser.add_argument("--sample-thickness", type=float, default=defaults.sample_thickness, help="H0 [m]")
     parser.add_argument("--speeds", type=float, nargs="+", default=list(defaults.base_speeds), help="[m/s]")
     parser.add_argument("--samples", type=int, default=defaults.samples, help="per curve")
+    parser.add_argument("--z-start", type=float, default=defaults.z_start, help="first base displacement [m] (< 0)")
     parser.add_argument("--z-end", type=float, default=defaults.z_end, help="final base displacement [m]")
+    parser.add_argument("--sample-rate", type=float, help="[Hz]: samples per curve from its duration (else --samples)")
     parser.add_argument("--noise", type=float, default=defaults.noise_std, help="force noise σ [N]")
+    parser.add_argument("--noise-correlation", type=float, default=0.0, help="lag-1 autocorrelation of the noise")
+    parser.add_argument("--replicates", type=int, default=1, help="curves per speed (v5, v5b, ...)")
+    parser.add_argument("--stiffness-spread", type=float, default=0.0, help="relative std of E* between curves")
+    parser.add_argument(
+        "--contact-error",
+        type=float,
+        default=0.0,
+        help="std of each curve's contact error [m]; writes contact_point: estimate",
+    )
+    parser.add_argument("--baseline-offset", type=float, default=0.0, help="std of each curve's force offset [N]")
+    parser.add_argument("--tilt", type=float, default=0.0, help="baseline slope dF/dz [N/m]")
     parser.add_argument("--seed", type=int, default=defaults.seed)
     args = parser.parse_args(argv)
     if args.truth.resolve().is_relative_to(args.out.resolve()):
@@ -55,13 +69,23 @@ def main(argv: list[str] | None = None) -> None:
     try:
         experiment = Experiment(
             probe_radius=args.probe_radius,
+            spring_constant=args.spring_constant,
             sample_thickness=args.sample_thickness,
             permeability=args.permeability,
             effective_modulus=args.effective_modulus,
             base_speeds=tuple(args.speeds),
             samples=args.samples,
+            z_start=args.z_start,
             z_end=args.z_end,
+            sample_rate=args.sample_rate,
             noise_std=args.noise,
+            noise_correlation=args.noise_correlation,
+            replicates=args.replicates,
+            stiffness_spread=args.stiffness_spread,
+            contact_point="estimate" if args.contact_error or args.baseline_offset or args.tilt else "known",
+            contact_error=args.contact_error,
+            baseline_offset=args.baseline_offset,
+            tilt=args.tilt,
             seed=args.seed,
             effects=parse_effects(args.effect),
         )

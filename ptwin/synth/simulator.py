@@ -19,10 +19,11 @@ C/τ_p = c·R·M stays finite as R → 0.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
+import scipy.signal
 import torch
 from scipy.integrate import solve_ivp
 
@@ -67,6 +68,15 @@ class Experiment:
     effects: dict[str, dict[str, float]] = field(default_factory=dict)
     rtol: float = 1e-9
     fluid_basis: str | None = None  # a PGD basis file: F_D from FluidForce instead of the closed form
+    # What real recordings have (off by default):
+    noise_correlation: float = 0.0  # lag-1 autocorrelation of the force noise, an AR(1)
+    replicates: int = 1  # curves per speed: ids v5, v5b, v5c, ...
+    stiffness_spread: float = 0.0  # relative std of E* from curve to curve (each a different spot)
+    contact_point: str = "known"  # "estimate": the recorded z is off by a random error per curve
+    contact_error: float = 0.0  # std of that error [m]
+    baseline_offset: float = 0.0  # std of a force offset per curve [N]
+    tilt: float = 0.0  # baseline slope dF/dz [N/m] (virtual deflection), every curve
+    sample_rate: float | None = None  # [Hz]: a curve has duration × rate samples (else ``samples``)
 
     def __post_init__(self):
         for term, params in self.effects.items():
@@ -79,9 +89,17 @@ class Experiment:
     def param(self, term: str, name: str, default: float = 0.0) -> float:
         return float(self.effects[term][name]) if term in self.effects else default
 
+    def time(self, speed: float) -> np.ndarray:
+        """Sample times of a curve at base speed ``speed`` [s]."""
+        duration = (self.z_end - self.z_start) / speed
+        if self.sample_rate is None:
+            return np.linspace(0.0, duration, self.samples)
+        return np.arange(0.0, duration, 1.0 / self.sample_rate)
 
-def curve_id(speed: float) -> str:
-    return f"v{speed * 1e6:g}"
+
+def curve_id(speed: float, replicate: int = 0) -> str:
+    """``v5`` for 5 µm/s; replicates ``v5b``, ``v5c``, ..."""
+    return f"v{speed * 1e6:g}" + ("" if replicate == 0 else chr(ord("a") + replicate))
 
 
 @dataclass
@@ -111,9 +129,9 @@ def fluid_coefficient_law(experiment: Experiment):
     return pgd
 
 
-def simulate_curve(experiment: Experiment, speed: float) -> CurveSimulation:
-    """The noise-free curve at base speed ``speed``."""
-    e = experiment
+def simulate_curve(experiment: Experiment, speed: float, effective_modulus: float | None = None) -> CurveSimulation:
+    """The noise-free curve at base speed ``speed`` (on a spot of ``effective_modulus``, default the experiment's)."""
+    e = replace(experiment, effective_modulus=effective_modulus or experiment.effective_modulus)
     rho, k, mu, H0 = e.probe_radius, e.spring_constant, e.fluid_viscosity, e.sample_thickness
     gamma = e.param("solid_viscosity", "gamma")
     g, tau = e.param("solid_relaxation", "g"), e.param("solid_relaxation", "tau", 1.0)
@@ -124,7 +142,7 @@ def simulate_curve(experiment: Experiment, speed: float) -> CurveSimulation:
     lagging = "pore_pressure_relaxation" in e.effects
     coefficient = fluid_coefficient_law(e)
 
-    time = np.linspace(0.0, (e.z_end - e.z_start) / speed, e.samples)
+    time = e.time(speed)
     z_true = e.z_start + speed * time
     contact_time = (drag / k - e.z_start) / speed  # tip reaches the surface: z − drag/k = 0
 
@@ -176,23 +194,47 @@ def simulate_curve(experiment: Experiment, speed: float) -> CurveSimulation:
 
 
 def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
-    """A whole recording set (meta and curves, noise added) for ``experiment``."""
-    rng = np.random.default_rng(experiment.seed)
+    """A whole recording set (meta and curves, noise and any recording artefacts added) for ``experiment``."""
+    e = experiment
+    rng = np.random.default_rng(e.seed)  # the noise; the artefacts draw from their own stream
+    artefacts = np.random.default_rng([e.seed, 1])
     frames = []
-    for speed in experiment.base_speeds:
-        curve = simulate_curve(experiment, speed)
-        noisy = curve.force + rng.normal(0.0, experiment.noise_std, curve.force.size)
-        frames.append(
-            pd.DataFrame(
-                {"curve": curve_id(speed), "base_speed": speed, "time": curve.time, "z": curve.z, "force": noisy}
+    for speed in e.base_speeds:
+        for replicate in range(e.replicates):
+            modulus = e.effective_modulus * (1.0 + e.stiffness_spread * artefacts.standard_normal())
+            curve = simulate_curve(e, speed, modulus)
+            noise = correlated_noise(rng, curve.force.size, e.noise_std, e.noise_correlation)
+            travel = curve.z - curve.z[0] + e.z_start  # the true base travel from contact
+            offset = e.baseline_offset * artefacts.standard_normal() + e.tilt * travel
+            z = curve.z + (e.contact_error * artefacts.standard_normal() if e.contact_point == "estimate" else 0.0)
+            frames.append(
+                pd.DataFrame(
+                    {
+                        "curve": curve_id(speed, replicate),
+                        "base_speed": speed,
+                        "time": curve.time,
+                        "z": z,
+                        "force": curve.force + offset + noise,
+                    }
+                )
             )
-        )
     meta = Meta(
-        probe_radius=experiment.probe_radius,
-        spring_constant=experiment.spring_constant,
-        sample_thickness=experiment.sample_thickness,
-        fluid_viscosity=experiment.fluid_viscosity,
-        reference_curve=curve_id(min(experiment.base_speeds)),
-        sample="synthetic (ptwin.data.simulator)",
+        probe_radius=e.probe_radius,
+        spring_constant=e.spring_constant,
+        sample_thickness=e.sample_thickness,
+        fluid_viscosity=e.fluid_viscosity,
+        reference_curve=curve_id(min(e.base_speeds)),
+        sample="synthetic (ptwin.synth)",
+        contact_point=e.contact_point,
     )
     return meta, pd.concat(frames, ignore_index=True)
+
+
+def correlated_noise(rng: np.random.Generator, size: int, std: float, lag1: float) -> np.ndarray:
+    """Stationary AR(1) noise of std ``std`` and lag-1 correlation ``lag1`` (white for 0)."""
+    white = rng.normal(0.0, std, size)
+    if lag1 == 0.0:
+        return white
+    first = white[:1]
+    rest = scipy.signal.lfilter([np.sqrt(1.0 - lag1**2)], [1.0, -lag1], white[1:], zi=lag1 * first)[0]
+    return np.concatenate([first, rest])
