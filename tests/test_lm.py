@@ -36,3 +36,41 @@ def test_covariance_of_a_straight_line_fit_matches_the_textbook():
     jacobian, r = solver.linearise(theta)
     s2 = (r @ r) / 48
     torch.testing.assert_close(covariance(jacobian, r), s2 * torch.linalg.inv(design.T @ design))
+
+
+def test_parameters_the_data_cannot_fix_are_not_identified_never_certain():
+    # y = (a + b)·x: only a + b is fixed by the data; c is fixed on its own.
+    x = torch.linspace(0, 1, 40, dtype=torch.float64)
+    design = torch.stack([x, x, x**2], 1)
+    r = 0.01 * torch.sin(7 * x)
+    cov = covariance(design, r)
+    assert torch.isinf(cov[0, 0]) and torch.isinf(cov[1, 1])
+    assert torch.isnan(cov[0, 2]) and torch.isnan(cov[2, 1])
+    identified = torch.stack([x, x**2], 1)  # the model in (a + b, c): the textbook variance of c
+    expected = (r @ r) / 37 * torch.linalg.inv(identified.T @ identified)[1, 1]
+    torch.testing.assert_close(cov[2, 2], expected)
+
+
+def test_a_step_the_model_cannot_evaluate_is_rejected_not_fatal():
+    # The model is defined for θ < 1 only (like a depth beyond the sample); the optimum is at 0.9.
+    def residual(theta):
+        if (theta >= 1).any():
+            raise ValueError("theta off its domain")
+        return torch.log1p(-theta) - torch.log1p(torch.tensor([-0.9], dtype=torch.float64))
+
+    solver = LevenbergMarquardt(residual, torch.tensor([0.0], dtype=torch.float64), damping=1e-9)
+    theta = solver.run(100, tolerance=0.0)
+    torch.testing.assert_close(theta, torch.tensor([0.9], dtype=torch.float64))
+
+
+def test_a_start_the_model_cannot_evaluate_is_a_fit_error_in_words():
+    import pytest
+
+    from ptwin.fitting.lm import FitError
+
+    def residual(theta):
+        return torch.sqrt(theta)  # NaN derivative at 0, NaN value below
+
+    solver = LevenbergMarquardt(residual, torch.tensor([-1.0], dtype=torch.float64))
+    with pytest.raises(FitError, match="not finite"):
+        solver.step()

@@ -5,6 +5,12 @@ Jacobians by ``jacfwd`` (tall: many residuals, few parameters), Marquardt scalin
 gain-ratio damping update, and an optional per-parameter learning rate that scales
 each accepted step (a lower rate for K than for a network, as the paper trains).
 The state is a plain dict of tensors: a checkpoint resumes it exactly.
+
+A trial step the model cannot evaluate (a parameter outside the model's domain: a
+depth beyond the sample, a grid the fluid layer refuses) is a rejected step, like one
+that raises the cost; after a rejection θ has not moved, so the Jacobian is reused.
+Only a start the model cannot evaluate, or a Jacobian that is not finite, ends the fit
+(``FitError``, with the reason in words).
 """
 
 from __future__ import annotations
@@ -49,6 +55,10 @@ class ParameterVector:
         )
 
 
+class FitError(RuntimeError):
+    """A least-squares fit that cannot go on; the message says why, in words."""
+
+
 @dataclass
 class Step:
     iteration: int
@@ -77,6 +87,7 @@ class LevenbergMarquardt:
             "iteration": torch.tensor(0),
             "cost": torch.tensor(float("nan"), dtype=torch.float64),
         }
+        self._linear = None  # (J, r) at the current θ, kept across rejected steps
 
     @property
     def theta(self) -> torch.Tensor:
@@ -91,21 +102,44 @@ class LevenbergMarquardt:
 
         return jacfwd(twice, has_aux=True)(theta)
 
+    def checked_linearise(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(J, r) at θ, or ``FitError`` saying why the model cannot be linearised there."""
+        try:
+            jacobian, r = self.linearise(theta)
+        except (ValueError, RuntimeError) as error:  # e.g. the fluid layer refusing a point off its grid
+            raise FitError(f"the model cannot be evaluated ({str(error).splitlines()[0]})") from None
+        if not (torch.isfinite(jacobian).all() and torch.isfinite(r).all()):
+            raise FitError("the model or its derivatives are not finite at these parameters")
+        return jacobian, r
+
+    def _trial_cost(self, theta: torch.Tensor) -> torch.Tensor:
+        """½‖r(θ)‖², infinite where the model cannot be evaluated."""
+        try:
+            with torch.no_grad():
+                trial = self.residual(theta)
+        except (ValueError, RuntimeError):
+            return torch.tensor(float("inf"), dtype=torch.float64)
+        return 0.5 * (trial @ trial)
+
     def step(self) -> Step:
         s = self.state
-        jacobian, r = self.linearise(s["theta"])
+        if self._linear is None:
+            self._linear = self.checked_linearise(s["theta"])
+        jacobian, r = self._linear
         normal = jacobian.T @ jacobian
         gradient = jacobian.T @ r
         cost = 0.5 * (r @ r)
         scale = normal.diagonal().clamp(min=1e-12 * normal.diagonal().max().clamp(min=1e-300))
-        delta = -torch.linalg.solve(normal + s["damping"] * torch.diag(scale), gradient) * self.learning_rate
+        try:
+            delta = -torch.linalg.solve(normal + s["damping"] * torch.diag(scale), gradient) * self.learning_rate
+        except RuntimeError:  # singular even with damping: a larger damping next time
+            delta = torch.zeros_like(gradient)
         predicted = -(gradient @ delta + 0.5 * delta @ normal @ delta)
-        with torch.no_grad():
-            trial = self.residual(s["theta"] + delta)
-        new_cost = 0.5 * (trial @ trial)
+        new_cost = self._trial_cost(s["theta"] + delta)
         gain = (cost - new_cost) / predicted if predicted > 0 else torch.tensor(-1.0)
         accepted = bool(torch.isfinite(new_cost) and gain > 0)
         if accepted:
+            self._linear = None
             s["theta"] = s["theta"] + delta
             s["damping"] = s["damping"] * max(1 / 3, 1 - (2 * gain.item() - 1) ** 3)
             s["nu"] = torch.tensor(2.0, dtype=torch.float64)
@@ -131,8 +165,29 @@ class LevenbergMarquardt:
         return self.theta
 
 
-def covariance(jacobian: torch.Tensor, residual: torch.Tensor) -> torch.Tensor:
-    """σ²(JᵀJ)⁻¹ with σ² = ‖r‖²/(n − p): the parameters' covariance at a least-squares optimum."""
+def covariance(jacobian: torch.Tensor, residual: torch.Tensor, rcond: float = 1e-12) -> torch.Tensor:
+    """σ²(JᵀJ)⁻¹ with σ² = ‖r‖²/(n − p): the parameters' covariance at a least-squares optimum.
+
+    Directions the data do not fix (eigenvalues of the Marquardt-scaled JᵀJ below ``rcond``
+    of the largest) are not identified: every parameter taking part in one gets an infinite
+    variance (and NaN covariances), never the zero a pseudo-inverse would give it.
+    """
     n, p = jacobian.shape
     variance = (residual @ residual) / max(n - p, 1)
-    return variance * torch.linalg.pinv(jacobian.T @ jacobian, hermitian=True)
+    normal = jacobian.T @ jacobian
+    scale = normal.diagonal().sqrt()
+    unknown = torch.full((p, p), float("nan"), dtype=normal.dtype)
+    if not torch.isfinite(normal).all() or not torch.isfinite(variance):
+        return unknown
+    live = scale > 0
+    inverse_scale = torch.where(live, 1.0 / scale.where(live, torch.ones_like(scale)), torch.zeros_like(scale))
+    scaled = normal * torch.outer(inverse_scale, inverse_scale) + torch.diag((~live).to(normal.dtype))
+    eigenvalues, vectors = torch.linalg.eigh(0.5 * (scaled + scaled.T))
+    kept = eigenvalues > rcond * eigenvalues.max()
+    inverse = (vectors[:, kept] / eigenvalues[kept]) @ vectors[:, kept].T
+    result = variance * inverse * torch.outer(inverse_scale, inverse_scale)
+    unidentified = (vectors[:, ~kept].abs() > 1e-6).any(dim=1) | ~live
+    result[unidentified, :] = float("nan")
+    result[:, unidentified] = float("nan")
+    result[unidentified, unidentified] = float("inf")
+    return result

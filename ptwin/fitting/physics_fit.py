@@ -1,7 +1,9 @@
 """Least-squares fits of a ``ForceModel``: K and the parameters of its terms.
 
-Residuals are in units of each curve's noise floor, so ½‖r‖² is a χ²/2 and the
-Bayesian information criterion compares models fitted to the same samples.
+Residuals are in units of each curve's noise std σ, so ½‖r‖² is a χ²/2 for white noise.
+Correlated noise (κ² > 1, ``ptwin.data.noise``) makes χ² differences between models κ²
+times too large for misfits that are smooth in time: the information criterion counts
+n/κ² effective samples and the parameter variances are κ² times the white ones.
 """
 
 from __future__ import annotations
@@ -11,9 +13,10 @@ import math
 from dataclasses import dataclass, field
 
 import torch
+from torch import nn
 from torch.func import functional_call
 
-from ptwin.fitting.lm import LevenbergMarquardt, ParameterVector, covariance
+from ptwin.fitting.lm import FitError, LevenbergMarquardt, ParameterVector, covariance
 from ptwin.physics.model import PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
@@ -21,7 +24,7 @@ from ptwin.physics.terms import VOCABULARY
 
 @dataclass
 class PhysicsFit:
-    """A fitted model on the samples ``index`` (SI values, std from the Jacobian)."""
+    """A fitted model on the samples ``index`` (SI values; std from the Jacobian, inf: not identified)."""
 
     terms: tuple[str, ...]
     permeability: float  # [m²]
@@ -29,28 +32,39 @@ class PhysicsFit:
     params: dict[str, dict[str, float]]
     param_std: dict[str, dict[str, float]]
     correlation_with_permeability: dict[str, dict[str, float]]
-    violations: dict[str, str]
+    violations: dict[str, str]  # term → why its fitted values are not physical
     chi_square: float  # ‖r‖² on the fitted samples (noise units)
     samples: int
     iterations: int
     model: ForceModel = field(repr=False)
+    parameter_count: int = 1  # free parameters fitted (K, the terms', the contact corrections)
+    inflation: float = 1.0  # κ² of the noise
+    degenerate: dict[str, str] = field(default_factory=dict)  # term → the limit it ran off to ('M → ∞')
+    implausible: dict[str, str] = field(default_factory=dict)  # term → which values are outside the field's
 
     @property
-    def parameter_count(self) -> int:
-        return 1 + sum(len(p) for p in self.params.values())
+    def effective_samples(self) -> float:
+        """n/κ²: as many white samples as the correlated ones are worth."""
+        return self.samples / self.inflation
 
     @property
     def bic(self) -> float:
-        n = self.samples
-        return n * math.log(self.chi_square / n) + self.parameter_count * math.log(n)
+        """Bayesian information criterion under the noise model (n/κ² effective samples)."""
+        n = self.effective_samples
+        return n * math.log(self.chi_square / self.samples) + self.parameter_count * math.log(n)
 
     @property
     def physical(self) -> bool:
         return not self.violations
 
+    @property
+    def usable(self) -> bool:
+        """Physical and with every term still acting: a candidate explanation."""
+        return self.physical and not self.degenerate
+
 
 def scaled_residual(model, samples: Samples, index: torch.Tensor):
-    """θ ↦ (model − measured)/noise floor on ``index``, θ: the model's parameters that require grad."""
+    """θ ↦ (model − measured)/σ on ``index``, θ: the model's parameters that require grad."""
     vector = ParameterVector(model, [n for n, p in model.named_parameters() if p.requires_grad])
     force, noise = samples.force[index], samples.noise_floor[index]
 
@@ -68,28 +82,35 @@ def rmse(model: ForceModel, samples: Samples, index: torch.Tensor) -> float:
 
 
 def fit_physics(model: ForceModel, samples: Samples, index: torch.Tensor, iterations: int = 60) -> PhysicsFit:
-    """Fit the free parameters of ``model`` (K and its terms; frozen ones stay) to ``samples[index]`` by LM."""
+    """Fit the free parameters of ``model`` (K and its terms; frozen ones stay) to ``samples[index]`` by LM.
+
+    Raises ``FitError`` (the reason in words) when the model cannot be evaluated or linearised.
+    """
     vector, residual = scaled_residual(model, samples, index)
     solver = LevenbergMarquardt(residual, vector.get())
     theta = solver.run(iterations)
     vector.set(theta)
-    jacobian, r = solver.linearise(theta)
-    cov = covariance(jacobian, r)
+    jacobian, r = solver.checked_linearise(theta)
+    cov = covariance(jacobian, r) * samples.noise_inflation
     std = cov.diagonal().clamp(min=0).sqrt()
     correlation = cov / torch.outer(std, std).clamp(min=1e-300)
-    k_index = vector.names.index(PERMEABILITY)
     raw_std = dict(zip(vector.names, std.tolist()))
-    raw_corr = dict(zip(vector.names, correlation[k_index].tolist()))
+    raw_corr = dict(zip(vector.names, correlation[vector.names.index(PERMEABILITY)].tolist()))
     permeability = model.fluid.permeability.item()
-    params, param_std, corr, violations = {}, {}, {}, {}
+    params, param_std, corr, violations, degenerate, implausible = {}, {}, {}, {}, {}, {}
     for name, term in model.terms.items():
         params[name] = term.values()
         raw = {p: f"terms.{name}.{term.raw_name(p)}" for p in term.PARAMS}
         param_std[name] = term.physical_std({term.raw_name(p): raw_std.get(key, 0.0) for p, key in raw.items()})
         corr[name] = {p: raw_corr.get(key, 0.0) for p, key in raw.items()}
-        reason = term.violation()
-        if reason:
-            violations[name] = reason
+        for found, reason in (
+            (violations, term.violation()),
+            (degenerate, _without_effect(model, name, samples, index)),
+        ):
+            if reason:
+                found[name] = reason
+        if term.implausible():
+            implausible[name] = term.implausible()
     return PhysicsFit(
         terms=tuple(model.terms),
         permeability=permeability,
@@ -102,13 +123,38 @@ def fit_physics(model: ForceModel, samples: Samples, index: torch.Tensor, iterat
         samples=int(index.numel()),
         iterations=int(solver.state["iteration"]),
         model=model,
+        parameter_count=theta.numel(),
+        inflation=samples.noise_inflation,
+        degenerate=degenerate,
+        implausible=implausible,
     )
+
+
+def _without_effect(model: ForceModel, name: str, samples: Samples, index: torch.Tensor) -> str | None:
+    """Why term ``name`` does nothing on ``samples[index]`` at its fitted values, or None: a parameter
+    run off to a limit, or an effect on the fitted forces below one unit of χ² under the noise model."""
+    limit = model.terms[name].degenerate()
+    if limit:
+        return limit
+    terms = model.terms
+    model.terms = nn.ModuleDict({other: term for other, term in terms.items() if other != name})
+    try:
+        with torch.no_grad():
+            without = model(samples)
+    finally:
+        model.terms = terms
+    with torch.no_grad():
+        change = ((model(samples) - without)[index] / samples.noise_floor[index]).square().sum().item()
+    if change / samples.noise_inflation < 1.0:
+        return "its effect on the fitted curves is below the noise"
+    return None
 
 
 def fit_with_starts(make_model, terms: tuple[str, ...], samples: Samples, index: torch.Tensor, iterations: int = 60):
     """``fit_physics`` from the best of the terms' starting values (judged by the cost there).
 
-    ``make_model(terms, values)`` builds a fresh ``ForceModel``.
+    ``make_model(terms, values)`` builds a fresh ``ForceModel``. Starts the model cannot evaluate
+    are skipped; ``FitError`` if none can be.
     """
     starts = [dict(zip(terms, combo)) for combo in itertools.product(*(VOCABULARY[t].STARTS for t in terms))]
     if len(starts) == 1:
@@ -117,8 +163,13 @@ def fit_with_starts(make_model, terms: tuple[str, ...], samples: Samples, index:
     for values in starts:
         model = make_model(terms, values)
         vector, residual = scaled_residual(model, samples, index)
-        with torch.no_grad():
-            cost = residual(vector.get()).square().sum()
+        try:
+            with torch.no_grad():
+                cost = residual(vector.get()).square().sum().item()
+        except (ValueError, RuntimeError):
+            continue
         if cost < best_cost:
-            best, best_cost = model, cost.item()
+            best, best_cost = model, cost
+    if best is None:
+        raise FitError("the model cannot be evaluated at any of its starting values")
     return fit_physics(best, samples, index, iterations)

@@ -44,8 +44,7 @@ def apparent_permeability(
     deeper than ``plateau_from`` × the curve's depth."""
 
     def residual(log_k):
-        k = log_k.exp()
-        return samples.force - base.elastic(samples.depth, k) - base.rate_forces(samples, None, k)["fluid"]
+        return samples.force - sum(base.components(samples, log_k.exp()).values())
 
     log_k = torch.full_like(samples.force, math.log(start))
     with torch.no_grad():

@@ -78,6 +78,14 @@ class _SeparableLaw(torch.autograd.Function):
         return tangent, None, None
 
 
+class FluidInputError(ValueError):
+    """An input the fluid layer cannot take; ``point`` is its index in the (flattened) batch."""
+
+    def __init__(self, message: str, point: int):
+        super().__init__(message)
+        self.point = point
+
+
 class FluidForce(nn.Module):
     """F_D = ∫_top P dA [N] for batches of (U [m/s], R [m], H [m]).
 
@@ -129,6 +137,7 @@ class FluidForce(nn.Module):
         """The force for an explicit permeability [m²]: a scalar, or one per point of the batch."""
         shape = torch.broadcast_shapes(velocity.shape, contact_radius.shape, height.shape)
         u, r, h = (t.expand(shape).reshape(-1) for t in (velocity, contact_radius, height))
+        self._check_inputs(u, r, h)
         smallest = self.functions["contact_radius"].minimum
         scale = None
         below = r < smallest
@@ -163,6 +172,24 @@ class FluidForce(nn.Module):
         for factor in (factors[2], factors[1], factors[0]):
             value = (value.reshape(value.shape[0], -1, factor.shape[1]) * factor[:, None, :]).sum(-1)
         return value[:, 0]
+
+    @staticmethod
+    def _check_inputs(velocity, contact_radius, height) -> None:
+        """``FluidInputError`` at the first point whose velocity is not finite, or whose contact radius or
+        height is not a finite non-negative length (before a NaN reaches a grid index)."""
+        for name, values, non_negative in (
+            ("velocity", velocity, False),
+            ("contact radius", contact_radius, True),
+            ("height", height, True),
+        ):
+            good = torch.isfinite(values) & (values >= 0) if non_negative else torch.isfinite(values)
+            if not bool(good.all()):
+                point = int((~good).nonzero()[0])
+                raise FluidInputError(
+                    f"FluidForce: {name} {values[point].item():.3g} at point {point} is not a finite"
+                    f"{' non-negative' if non_negative else ''} number",
+                    point,
+                )
 
     def _in_range(self, name: str, values: torch.Tensor, clamp_above: bool = False) -> torch.Tensor:
         function = self.functions[name]

@@ -8,8 +8,9 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
+from ptwin.physics.contact import ContactNuisance
 from ptwin.physics.elastic import ReferenceCurve
-from ptwin.physics.fluid_force import FluidForce
+from ptwin.physics.fluid_force import FluidForce, FluidInputError
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
@@ -25,6 +26,13 @@ def smooth_contact_radius(depth: torch.Tensor, probe_radius: float) -> torch.Ten
     return squared.sqrt().where(inside, torch.zeros_like(w))
 
 
+def _sample_name(samples: Samples, index: int) -> str:
+    """'curve v5, sample 123' for a sample index of ``samples`` (counted within its curve)."""
+    curve = int(samples.curve[index])
+    first = int((samples.curve == curve).nonzero()[0])
+    return f"curve {samples.curve_ids[curve]}, sample {index - first}"
+
+
 class ForceModel(nn.Module):
     """Predicted force [N] of every sample: F_el(w) + F_D(U, K_eff, R, H) + terms.
 
@@ -35,7 +43,8 @@ class ForceModel(nn.Module):
     itself (relaxation) makes that a fixed point, iterated a few passes. With
     ``self_consistent=False`` the reference curve is taken as purely elastic (the
     paper's variant). ``probe_radius`` ρ and ``sample_thickness`` H0 [m]; K is
-    ``fluid.log_permeability`` (``PERMEABILITY``).
+    ``fluid.log_permeability`` (``PERMEABILITY``). ``contact``: each curve's contact point,
+    fitted as a nuisance (estimated contacts), or None (known contacts).
     """
 
     def __init__(
@@ -47,6 +56,7 @@ class ForceModel(nn.Module):
         terms: Sequence[str] = (),
         values: dict[str, dict[str, float]] | None = None,
         self_consistent: bool = True,
+        contact: ContactNuisance | None = None,
     ):
         super().__init__()
         values = values or {}
@@ -58,6 +68,11 @@ class ForceModel(nn.Module):
         self.probe_radius, self.sample_thickness = probe_radius, sample_thickness
         self.terms = nn.ModuleDict({n: VOCABULARY[n](probe_radius, **values.get(n, {})) for n in terms})
         self.self_consistent = self_consistent
+        self.contact = contact
+
+    def depth(self, samples: Samples) -> torch.Tensor:
+        """The samples' depth [m], their curve's contact correction applied (estimated contacts)."""
+        return samples.depth if self.contact is None else samples.depth - self.contact.shift(samples)
 
     def rate_forces(
         self, samples: Samples, elastic: torch.Tensor | None = None, permeability: torch.Tensor | None = None
@@ -67,7 +82,7 @@ class ForceModel(nn.Module):
         ``elastic``: F_el of the samples, for terms acting on it (left out when None);
         ``permeability``: K [m²] instead of the model's, one or one per sample.
         """
-        depth = samples.depth
+        depth = self.depth(samples)
         for term in self.terms.values():
             shift = term.depth_shift()
             depth = depth if shift is None else depth - shift
@@ -76,7 +91,10 @@ class ForceModel(nn.Module):
         for term in self.terms.values():
             factor = term.permeability_factor(depth)
             permeability = permeability if factor is None else permeability * factor
-        fluid = self.fluid.evaluate(samples.velocity, radius, self.sample_thickness - depth, permeability)
+        try:
+            fluid = self.fluid.evaluate(samples.velocity, radius, self.sample_thickness - depth, permeability)
+        except FluidInputError as error:
+            raise FluidInputError(f"{error}; {_sample_name(samples, error.point)}", error.point) from None
         for term in self.terms.values():
             lagged = term.lag_fluid(fluid, samples, radius, permeability, self.fluid.viscosity)
             fluid = fluid if lagged is None else lagged
@@ -113,10 +131,11 @@ class ForceModel(nn.Module):
         index, t = self.reference.bracket(depth)
         return self.elastic_nodes(permeability, index) * (1 - t) + self.elastic_nodes(permeability, index + 1) * t
 
-    def components(self, samples: Samples) -> dict[str, torch.Tensor]:
-        """{'elastic': F_el, 'fluid': F_D or F_p, term name: its added force} [N], each (S,)."""
-        elastic = self.elastic(samples.depth)
-        return {"elastic": elastic, **self.rate_forces(samples, elastic)}
+    def components(self, samples: Samples, permeability: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """{'elastic': F_el, 'fluid': F_D or F_p, term name: its added force} [N], each (S,);
+        ``permeability``: K [m²] instead of the model's, one or one per sample (stage 1's K(w))."""
+        elastic = self.elastic(self.depth(samples), permeability)
+        return {"elastic": elastic, **self.rate_forces(samples, elastic, permeability)}
 
     def forward(self, samples: Samples) -> torch.Tensor:
         return sum(self.components(samples).values())

@@ -27,11 +27,12 @@ class Samples:
     start: torch.Tensor  # bool: first sample of a curve
     curve: torch.Tensor  # long: index into ``curve_ids``
     in_contact: torch.Tensor  # bool: samples a fit may use
-    noise_floor: torch.Tensor  # [N], the curve's
+    noise_floor: torch.Tensor  # [N], the curve's noise std σ
     curve_ids: tuple[str, ...]
+    noise_inflation: float = 1.0  # κ² of the set's noise: block-mean variance over the white expectation
 
     @classmethod
-    def from_curves(cls, curves: list[CurveKinematics]) -> Samples:
+    def from_curves(cls, curves: list[CurveKinematics], noise_inflation: float = 1.0) -> Samples:
         def cat(values):
             return torch.from_numpy(np.concatenate(values))
 
@@ -47,6 +48,7 @@ class Samples:
             in_contact=cat([c.in_contact for c in curves]),
             noise_floor=cat([np.full(len(c.time), c.noise_floor) for c in curves]),
             curve_ids=tuple(c.curve for c in curves),
+            noise_inflation=noise_inflation,
         )
 
     def __len__(self) -> int:

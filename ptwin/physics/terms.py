@@ -30,7 +30,9 @@ class Parameter:
     """One parameter of a term, in SI units.
 
     ``log``: fitted as log(value) (positivity is the physics); ``minimum``: physical only
-    at or above it; ``maximum``: physical only below it.
+    at or above it; ``maximum``: physical only below it; ``plausible``: the range where
+    samples of the field have it. A log-parametrised value far outside that range (×/÷
+    ``LIMIT``) is a limit where the term has no effect left: it reduces to the base model.
     """
 
     unit: str
@@ -38,6 +40,19 @@ class Parameter:
     log: bool = False
     minimum: float | None = None
     maximum: float | None = None
+    plausible: tuple[float, float] = (-math.inf, math.inf)
+
+    LIMIT: ClassVar[float] = 1e3
+
+    def limit(self, name: str, value: float) -> str | None:
+        """'M → ∞' where a log-parametrised value has run off to a limit, else None."""
+        if not self.log:
+            return None
+        if not math.isfinite(value) or value > self.plausible[1] * self.LIMIT:
+            return f"{name} → ∞"
+        if value < self.plausible[0] / self.LIMIT:
+            return f"{name} → 0"
+        return None
 
     def label(self, name: str) -> str:
         """Axis label of a plot of this parameter, with its physical range."""
@@ -50,7 +65,10 @@ class Term(nn.Module):
 
     Class facts: ``name`` (the contract's), ``PARAMS`` (name → ``Parameter``), ``STARTS``
     (starting values a fit tries), ``TELL_APART`` (the experiment that separates it from
-    a term explaining the same residual), ``ACTS_ON_ELASTIC`` (its hook is ``elastic_force``).
+    a term explaining the same residual), ``ACTS_ON_ELASTIC`` (its hook is ``elastic_force``),
+    ``WITH_ESTIMATED_CONTACT`` (why it is no candidate when contact points are estimated:
+    what it models is then fitted or removed as a nuisance; None if it stays one),
+    ``CONTACT_CAVEAT`` (what estimated contacts hide of it on approach curves, or None).
     """
 
     name: ClassVar[str]
@@ -58,6 +76,8 @@ class Term(nn.Module):
     STARTS: ClassVar[list[dict[str, float]]] = [{}]
     TELL_APART: ClassVar[str]
     ACTS_ON_ELASTIC: ClassVar[bool] = False
+    WITH_ESTIMATED_CONTACT: ClassVar[str | None] = None
+    CONTACT_CAVEAT: ClassVar[str | None] = None
 
     def __init__(self, probe_radius: float, **values: float):
         super().__init__()
@@ -84,6 +104,21 @@ class Term(nn.Module):
             name: raw_std[self.raw_name(name)] * (self.value(name).item() if parameter.log else 1.0)
             for name, parameter in self.PARAMS.items()
         }
+
+    def degenerate(self) -> str | None:
+        """Why the fitted values leave the term without effect ('tau → 0'), or None."""
+        limits = [self.PARAMS[name].limit(name, value) for name, value in self.values().items()]
+        return "; ".join(limit for limit in limits if limit) or None
+
+    def implausible(self) -> str | None:
+        """Which fitted values lie outside the range samples of the field have, or None."""
+        outside = []
+        for name, parameter in self.PARAMS.items():
+            low, high = parameter.plausible
+            value = self.value(name).item()
+            if not low <= value <= high:
+                outside.append(f"{name} = {value:.3g} {parameter.unit} is outside [{low:g}, {high:g}]")
+        return "; ".join(outside) or None
 
     def violation(self) -> str | None:
         """Why the fitted values are not physical, or None."""
@@ -116,8 +151,13 @@ class SolidViscosity(Term):
     """Kelvin–Voigt viscous network: + π γ R U (gamma [Pa s])."""
 
     name = "solid_viscosity"
-    PARAMS = {"gamma": Parameter("Pa s", 0.0, minimum=0.0)}
+    PARAMS = {"gamma": Parameter("Pa s", 0.0, minimum=0.0, plausible=(0.0, 1e4))}
     TELL_APART = "a force ∝ R·U: compare base speeds a decade apart at equal depth"
+    # π·γ·R·U = π·γ·U·√(2ρw) and a contact shift δ changes a sphere's force by 2E*·√(ρw)·δ: the same √w.
+    CONTACT_CAVEAT = (
+        "on a sphere its force (∝ U·√w) is exactly the force of a shifted contact point, so with contact points "
+        "estimated per curve it hides in them on approach curves; a hold at constant depth (U = 0) shows it"
+    )
 
     def force(self, samples, radius):
         return math.pi * self.value("gamma") * radius * samples.velocity
@@ -127,7 +167,10 @@ class SolidRelaxation(Term):
     """Standard-linear-solid network: + g ∫ exp(−(t−s)/tau) dF_el/ds ds (g [–], tau [s])."""
 
     name = "solid_relaxation"
-    PARAMS = {"g": Parameter("–", 0.1, minimum=0.0), "tau": Parameter("s", 1.0, log=True)}
+    PARAMS = {
+        "g": Parameter("–", 0.1, minimum=0.0, plausible=(0.0, 5.0)),
+        "tau": Parameter("s", 1.0, log=True, plausible=(1e-4, 1e4)),
+    }
     STARTS = [{"tau": tau} for tau in (1e-2, 1e-1, 1.0, 10.0)]
     TELL_APART = "a hold at constant depth (stress relaxation over tau)"
     ACTS_ON_ELASTIC = True
@@ -141,7 +184,7 @@ class PorePressureRelaxation(Term):
     """Finite drainage: F_D → F_p, tau_p dF_p/dt + F_p = F_D, tau_p = μR²/(K M) (M [Pa])."""
 
     name = "pore_pressure_relaxation"
-    PARAMS = {"M": Parameter("Pa", 1.0e5, log=True)}
+    PARAMS = {"M": Parameter("Pa", 1.0e5, log=True, plausible=(1e2, 1e8))}
     STARTS = [{"M": m} for m in (1e3, 1e4, 1e5, 1e6)]
     TELL_APART = "a deeper indent (tau_p grows as R²) or a hold at constant depth"
 
@@ -154,7 +197,7 @@ class StrainDependentPermeability(Term):
     """K → K·exp(−m w/ρ) (m [–])."""
 
     name = "strain_dependent_permeability"
-    PARAMS = {"m": Parameter("–", 0.0, minimum=0.0)}
+    PARAMS = {"m": Parameter("–", 0.0, minimum=0.0, plausible=(0.0, 50.0))}
     TELL_APART = "a deeper indent (the effect grows with w/rho, not with speed)"
 
     def permeability_factor(self, depth):
@@ -165,8 +208,9 @@ class CantileverDrag(Term):
     """Hydrodynamic drag on the cantilever: + b · base_speed (b [N s/m])."""
 
     name = "cantilever_drag"
-    PARAMS = {"b": Parameter("N s/m", 0.0, minimum=0.0)}
+    PARAMS = {"b": Parameter("N s/m", 0.0, minimum=0.0, plausible=(0.0, 1e-2))}
     TELL_APART = "the approach before contact at each speed (drag offsets the baseline)"
+    WITH_ESTIMATED_CONTACT = "each curve's baseline offset, where drag shows, is removed (and reported)"
 
     def force(self, samples, radius):
         return self.value("b") * samples.base_speed
@@ -178,6 +222,7 @@ class ContactOffset(Term):
     name = "contact_offset"
     PARAMS = {"delta": Parameter("m", 0.0)}
     TELL_APART = "more pre-contact baseline and a slower first contact"
+    WITH_ESTIMATED_CONTACT = "each curve's contact point is fitted as a nuisance"
 
     def violation(self):
         limit = self.probe_radius / 4

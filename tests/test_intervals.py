@@ -1,0 +1,80 @@
+"""Profile-likelihood intervals: exact where the textbook says so, honest where it cannot be."""
+
+import math
+
+import pytest
+import torch
+from torch import nn
+
+from ptwin.diagnosis.intervals import LEVEL, profile_interval
+from ptwin.fitting.lm import LevenbergMarquardt
+from ptwin.fitting.physics_fit import PhysicsFit, scaled_residual
+from ptwin.physics.samples import Samples
+
+
+class Line(nn.Module):
+    """y = a + b·x: a 'model' of samples, with x in their time."""
+
+    def __init__(self):
+        super().__init__()
+        self.a = nn.Parameter(torch.zeros((), dtype=torch.float64))
+        self.b = nn.Parameter(torch.zeros((), dtype=torch.float64))
+
+    def forward(self, samples):
+        return self.a + self.b * samples.time
+
+
+def line_samples(inflation=1.0, n=400):
+    generator = torch.Generator().manual_seed(4)
+    x = torch.linspace(0, 1, n, dtype=torch.float64)
+    y = 2.0 + 3.0 * x + 0.1 * torch.randn(n, generator=generator, dtype=torch.float64)
+    zeros = torch.zeros(n, dtype=torch.float64)
+    flags = torch.zeros(n, dtype=torch.bool)
+    return Samples(x, zeros, zeros, zeros, y, flags, flags.long(), ~flags, torch.full_like(x, 0.1), ("c",), inflation)
+
+
+def fitted_line(samples):
+    model = Line()
+    index = torch.arange(len(samples))
+    vector, residual = scaled_residual(model, samples, index)
+    theta = LevenbergMarquardt(residual, vector.get()).run(50)
+    vector.set(theta)
+    chi_square = residual(theta).square().sum().item()
+    fit = PhysicsFit((), 1.0, 0.0, {}, {}, {}, {}, chi_square, len(samples), 1, model, 2, samples.noise_inflation)
+    return fit, index
+
+
+@pytest.mark.parametrize("inflation", [1.0, 4.0])
+def test_the_profile_of_a_linear_model_is_the_textbook_interval_times_the_noise_inflation(inflation):
+    samples = line_samples(inflation)
+    fit, index = fitted_line(samples)
+    x = samples.time
+    design = torch.stack([torch.ones_like(x), x], 1)
+    reduced = max(1.0, fit.chi_square / (len(samples) - 2))
+    std = 0.1 * math.sqrt(torch.linalg.inv(design.T @ design)[1, 1].item() * inflation * reduced)
+    low, high = profile_interval(fit, "b", std, samples, index)
+    b = fit.model.b.item()
+    half = math.sqrt(LEVEL) * std
+    assert low == pytest.approx(b - half, rel=1e-3)
+    assert high == pytest.approx(b + half, rel=1e-3)
+
+
+def test_a_side_the_data_do_not_close_is_open():
+    # y depends on a only through exp(−a): large a all look alike, so the interval is open above.
+    samples = line_samples()
+
+    class Saturating(Line):
+        def forward(self, samples):
+            return 5.0 - 3.0 * torch.exp(-self.a) + 0 * self.b * samples.time
+
+    samples.force[:] = 5.0 - 3.0 * math.exp(-8.0) + 0.1 * torch.randn(len(samples), dtype=torch.float64)
+    model = Saturating()
+    with torch.no_grad():
+        model.a.fill_(8.0)
+    index = torch.arange(len(samples))
+    vector, residual = scaled_residual(model, samples, index)
+    chi_square = residual(vector.get()).square().sum().item()
+    fitted = PhysicsFit((), 1.0, 0.0, {}, {}, {}, {}, chi_square, len(samples), 1, model, 2)
+    low, high = profile_interval(fitted, "a", 1.0, samples, index)
+    assert high is None
+    assert low is not None and low < 8.0
