@@ -5,7 +5,8 @@ the paper's identification chain (stage 1: global and pointwise K; stage 2: K wi
 viscous term; stage 3: the hybrid twin) and the diagnosis of what physics the base
 model left out. Everything lands in the run directory (results.json, diagnosis.json,
 report.md, figures, TensorBoard events, checkpoint.pt); the stages are
-``ptwin.pipeline``. Bad input ends the run with one line and exit code 2.
+``ptwin.pipeline``. Bad input ends the run with one line and exit code 2 (anything
+unforeseen: one line, exit code 3, the traceback in the run directory's error.log).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from ptwin.app import register, typed, user_errors_exit_2
+from ptwin.app import one_line_errors, register, typed
 from ptwin.pipeline.run import run
 
 register()
@@ -24,8 +25,9 @@ register()
 
 @hydra.main(version_base="1.3", config_path="configs", config_name="train")
 def main(cfg: DictConfig) -> None:
-    with user_errors_exit_2():
-        run(typed(cfg), Path(HydraConfig.get().runtime.output_dir))
+    output_dir = Path(HydraConfig.get().runtime.output_dir)
+    with one_line_errors(output_dir):
+        run(typed(cfg), output_dir)
 
 
 if __name__ == "__main__":

@@ -1,14 +1,17 @@
 """What the Hydra faces share (``train.py``, ``python -m ptwin.pgd``): the typed settings
-registered as the configs' schema, their conversion to dataclasses, and one line with
-exit code 2 for every error a user can fix (bad recordings, a damaged or foreign
-checkpoint, an impossible setting)."""
+registered as the configs' schema, their conversion to dataclasses, and one line on
+stderr for anything that ends a run: exit code 2 for what a user can fix (bad
+recordings, a set that cannot support a diagnosis, a damaged or foreign checkpoint, an
+impossible setting), 3 for anything else, its traceback kept in the run directory."""
 
 from __future__ import annotations
 
 import sys
+import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
@@ -48,10 +51,21 @@ def typed(cfg: DictConfig):
 
 
 @contextmanager
-def user_errors_exit_2() -> Iterator[None]:
-    """Errors a user can fix end the run with their one line on stderr and exit code 2."""
+def one_line_errors(output_dir: Path) -> Iterator[None]:
+    """Errors a user can fix end the run with their one line and exit code 2; anything else with one
+    line naming it and ``output_dir/error.log`` (the traceback, to report) and exit code 3."""
     try:
         yield
     except (RecordingError, StoredFileError, SettingsError) as error:
         print(error, file=sys.stderr)
         raise SystemExit(2) from None
+    except Exception as error:
+        log = output_dir / "error.log"
+        log.parent.mkdir(parents=True, exist_ok=True)
+        log.write_text(traceback.format_exc())
+        first = str(error).splitlines()[0] if str(error) else ""
+        print(
+            f"ptwin: unexpected {type(error).__name__} ({first}); the traceback is in {log}: please report it",
+            file=sys.stderr,
+        )
+        raise SystemExit(3) from None

@@ -54,8 +54,10 @@ def candidate(terms, chi_square, val_rmse, violations=None, whiteness=1.0):
     from ptwin.fitting.physics_fit import PhysicsFit
 
     params = {t: {"p": 1.0} for t in terms}
-    fit = PhysicsFit(terms, 1.0, 0.1, params, params, params, violations or {}, chi_square, 1000, 1, None)
-    return Candidate(fit, val_rmse, whiteness)
+    fit = PhysicsFit(
+        terms, 1.0, 0.1, params, params, params, violations or {}, chi_square, 1000, 1, None, 1 + len(terms)
+    )
+    return Candidate(terms, fit, val_rmse, whiteness)
 
 
 def test_choose_takes_the_lowest_physical_bic_then_prunes_what_does_not_pay_twice():

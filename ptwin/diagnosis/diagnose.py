@@ -1,5 +1,5 @@
-"""The diagnosis stage: locate, name, refit, and say it in the contract's terms
-(``diagnosis.json``, shared/physics-terms.md: ``Diagnosis.to_json`` is its one writer)."""
+"""The diagnosis stage: locate, name, grade, refit, and say it in the contract's terms
+(``diagnosis.json``, shared/physics-terms.md v2: ``Diagnosis.to_json`` is its one writer)."""
 
 from __future__ import annotations
 
@@ -9,19 +9,24 @@ from dataclasses import dataclass, field
 
 import torch
 
+from ptwin.data.noise import NoiseModel
+from ptwin.diagnosis.confidence import Grade, HeldOut, grade, held_out_curves
+from ptwin.diagnosis.intervals import profile_interval
 from ptwin.diagnosis.locate import Mismatch, locate
 from ptwin.diagnosis.name import Candidate, choose, confounded, fit_candidates, rejected
+from ptwin.diagnosis.words import finite_or_none, summarise
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import rmse_of
 from ptwin.fitting.physics_fit import PhysicsFit, rmse
 from ptwin.fitting.pointwise import ApparentPermeability
 from ptwin.fitting.split import Split
+from ptwin.physics.model import PERMEABILITY
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
-FORMAT = "ptwin-diagnosis/1"
-POORLY_IDENTIFIED = 0.5  # relative standard deviation
-CORRELATED = 0.95  # |correlation| with K
+FORMAT = "ptwin-diagnosis/2"
+CORRELATED = 0.95  # |correlation| with K worth a warning
+MATERIAL = 0.02  # a relative difference in K worth saying that K is not fixed
 
 
 @dataclass
@@ -58,9 +63,10 @@ class Diagnosis:
     rejected: list[dict]
     confounded: list[dict]
     unexplained: bool
-    whiteness: dict[str, float]  # base / corrected
+    whiteness: dict[str, float]  # base / corrected, in units of the noise model
     fit: dict[str, dict[str, float]]  # base / corrected / hybrid → val_rmse, test_rmse [N]
-    noise_floor: float
+    noise: NoiseModel
+    permeability: dict  # base, corrected, corrected_std, corrected_interval [m²]
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -71,36 +77,42 @@ class Diagnosis:
     def corrected(self) -> Candidate:
         return self.candidates[self.chosen]
 
+    @property
+    def noise_floor(self) -> float:
+        return self.noise.std
+
     def to_json(self) -> dict:
-        """``diagnosis.json`` as shared/physics-terms.md specifies."""
-        return {
+        """``diagnosis.json`` as shared/physics-terms.md v2 specifies (plus ``notes``); every number
+        that could not be determined is null."""
+        where = [
+            {
+                "curve": m.curve,
+                "depth_from": m.depth_from,
+                "depth_to": m.depth_to,
+                "rms_residual": m.rms_residual,
+                "noise_floor": m.noise_floor,
+            }
+            for m in self.where
+        ]
+        payload = {
             "format": FORMAT,
-            "mismatch": {
-                "detected": self.detected,
-                "summary": self.summary,
-                "where": [
-                    {
-                        "curve": m.curve,
-                        "depth_from": m.depth_from,
-                        "depth_to": m.depth_to,
-                        "rms_residual": m.rms_residual,
-                        "noise_floor": m.noise_floor,
-                    }
-                    for m in self.where
-                ],
-            },
+            "mismatch": {"detected": self.detected, "summary": self.summary, "where": where},
             "left_out": self.left_out,
-            "rejected": self.rejected,
             "confounded": self.confounded,
+            "rejected": self.rejected,
             "unexplained": self.unexplained,
-            "permeability": {
-                "base": self.base.fit.permeability,
-                "corrected": self.corrected.fit.permeability,
-                "corrected_std": self.corrected.fit.permeability_std,
+            "permeability": self.permeability,
+            "noise_floor": self.noise.std,
+            "noise": {
+                "std": self.noise.std,
+                "correlation_time": self.noise.correlation_time,
+                "source": self.noise.source,
+                "inflation": self.noise.inflation,
             },
-            "noise_floor": self.noise_floor,
             "fit": self.fit,
+            "notes": self.notes,
         }
+        return finite_or_none(payload)
 
 
 def diagnose(
@@ -111,74 +123,124 @@ def diagnose(
     apparent: ApparentPermeability,
     settings: DiagnosisSettings,
     iterations: int,
-    noise_floor: float,
+    noise: NoiseModel,
     progress: Callable[[str], None] = print,
     base_fit: PhysicsFit | None = None,
+    notes: list[str] | None = None,
 ) -> Diagnosis:
     """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); candidate fits run
-    ``iterations`` LM steps; ``noise_floor`` [N] is the run's; ``base_fit``: the base model already
-    fitted so on ``split.train``, if any."""
+    ``iterations`` LM steps; ``noise`` is the set's noise model; ``base_fit``: the base model already
+    fitted so on ``split.train``, if any; ``notes``: evidence about the data, in sentences."""
     s = settings
     seen = torch.cat([split.train, split.val]).sort().values
     progress("diagnosis: fitting the base model and the candidate terms (K refitted with each)")
+    fitted = {(): base_fit} if base_fit is not None else None
     candidates = fit_candidates(
-        make_model,
-        samples,
-        split,
-        s.terms,
-        s.max_terms,
-        iterations,
-        s.block,
-        s.whiteness_threshold,
-        progress,
-        {(): base_fit} if base_fit is not None else None,
+        make_model, samples, split, s.terms, s.max_terms, iterations, s.block, s.whiteness_threshold, progress, fitted
     )
     base = candidates[()]
+    pick = _select(candidates, s)
     with torch.no_grad():
         base_residual = base.fit.model(samples)[seen] - samples.force[seen]
-    detected = base.whiteness > s.whiteness_threshold
-    where = locate(samples, base_residual, seen, s.block, s.whiteness_threshold) if detected else []
-    chosen, notes = choose(candidates, s.bic_margin, s.heldout_margin) if detected else ((), [])
-    corrected = candidates[chosen]
-    unexplained = detected and (not chosen or corrected.whiteness > s.whiteness_threshold)
-    if unexplained and chosen:
-        notes.append(
-            f"{' + '.join(chosen)} lowers the BIC most but leaves structure (whiteness {corrected.whiteness:.1f} > "
-            f"{s.whiteness_threshold:g}): not claimed"
-        )
-        chosen, corrected = (), base
+    where = locate(samples, base_residual, seen, s.block, s.whiteness_threshold) if pick.structured else []
+    chosen, corrected = pick.chosen, candidates[pick.chosen]
+    # Failed fits and fits whose terms do nothing say so here; non-physical ones are listed as rejected.
+    notes = [*(notes or []), *pick.notes]
+    notes += [f"{' + '.join(t) or 'base'}: {c.state}" for t, c in candidates.items() if c.without_effect]
     fit = _fit_table(samples, split, base, corrected, hybrid)
+    rivals = _rivals(candidates, pick, s)
+    confounds = [_confound(chosen, other, candidates) for other in rivals]
+    progress("diagnosis: the named terms on curves left out of the fit, and intervals under the noise model")
     with torch.no_grad():
         learned = hybrid.network(samples)[seen]
         named = corrected.fit.model(samples)[seen] - base.fit.model(samples)[seen]
-    confounds = [
-        {
-            "terms": [" + ".join(chosen), " + ".join(other)],
-            "tell_apart": "; ".join(VOCABULARY[t].TELL_APART for t in sorted(set(chosen) ^ set(other))),
-        }
-        for other in confounded(candidates, chosen, s.bic_margin, s.heldout_margin)
-    ]
-    context = _Context(samples, split, candidates, corrected, fit, noise_floor, _explained_fraction(learned, named))
-    left_out = sorted(
-        (_left_out_entry(term, chosen, context, confounds) for term in chosen), key=lambda e: -e["test_rmse_gain"]
-    )
+    context = _Context(samples, split, seen, candidates, corrected, fit, noise, _explained_fraction(learned, named))
+    left_out = [_left_out_entry(term, chosen, context, rivals, make_model, s, pick.weak) for term in chosen]
+    left_out.sort(key=lambda entry: -entry["test_rmse_gain"])
     diagnosis = Diagnosis(
-        detected=detected,
+        detected=pick.detected,
         summary="",
         where=where,
         chosen=chosen,
         candidates=candidates,
         left_out=left_out,
-        rejected=rejected(candidates, s.bic_margin) if detected else [],
+        rejected=rejected(candidates, s.bic_margin) if pick.detected else [],
         confounded=confounds,
-        unexplained=unexplained,
+        unexplained=pick.unexplained,
         whiteness={"base": base.whiteness, "corrected": corrected.whiteness},
         fit=fit,
-        noise_floor=noise_floor,
+        noise=noise,
+        permeability=_permeability(context, [candidates[t] for t in rivals], pick.unexplained),
         notes=notes,
     )
     diagnosis.summary = summarise(diagnosis, apparent, s.whiteness_threshold)
     return diagnosis
+
+
+@dataclass
+class _Selection:
+    """What the candidates say: whether the base model misses, and what is named."""
+
+    structured: bool  # the base model's residual is structure beyond the noise (whiteness above threshold)
+    chosen: tuple[str, ...] = ()
+    weak: str | None = None  # why the choice is weak whatever else: only the information criterion prefers it
+    unexplained: bool = False
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def detected(self) -> bool:
+        return self.structured or bool(self.chosen)
+
+
+def _select(candidates: dict, s: DiagnosisSettings) -> _Selection:
+    """Structure in the base residual: the chosen subset (``choose``), or unexplained if it leaves structure
+    or there is none. No structure, but single terms that beat the base model by the BIC margin under the
+    noise model: the best of them, named with weak confidence. Neither: nothing is named."""
+    base = candidates[()]
+    if base.whiteness > s.whiteness_threshold:
+        chosen, notes = choose(candidates, s.bic_margin, s.heldout_margin)
+        corrected = candidates[chosen]
+        if chosen and corrected.whiteness <= s.whiteness_threshold:
+            return _Selection(True, chosen, notes=notes)
+        if chosen:
+            notes.append(
+                f"{' + '.join(chosen)} lowers the BIC most but leaves structure (whiteness "
+                f"{corrected.whiteness:.1f} > {s.whiteness_threshold:g}): not claimed"
+            )
+        return _Selection(True, unexplained=True, notes=notes)
+    better = [c for t, c in candidates.items() if len(t) == 1 and c.usable and base.fit.bic - c.fit.bic >= s.bic_margin]
+    if not better:
+        return _Selection(False)
+    best = min(better, key=lambda c: c.fit.bic)
+    why = (
+        f"the base model's residual is within the noise (whiteness {base.whiteness:.1f} ≤ {s.whiteness_threshold:g}): "
+        f"only the information criterion prefers it, by {base.fit.bic - best.fit.bic:.0f}"
+    )
+    return _Selection(False, best.terms, weak=why)
+
+
+def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings) -> list[tuple[str, ...]]:
+    """Subsets that explain the data about as well as the chosen one (the base model among them when the
+    choice is weak); with nothing named, the single terms that explain them as well as the base model
+    does but with a materially different K (K is then not fixed by the data)."""
+    if pick.chosen:
+        rivals = confounded(candidates, pick.chosen, s.bic_margin, s.heldout_margin)
+        return [*rivals, ()] if pick.weak else rivals
+    if pick.unexplained:
+        return []
+    base = candidates[()].fit
+    return [
+        t
+        for t, c in candidates.items()
+        if len(t) == 1 and c.usable and c.fit.bic - base.bic < s.bic_margin and _other_permeability(c.fit, base)
+    ]
+
+
+def _other_permeability(fit: PhysicsFit, base: PhysicsFit) -> bool:
+    """K lies outside the base model's 95% interval and differs by more than ``MATERIAL`` of it (a
+    difference a user would act on). The candidate's own K may be uncertain: that K is unfixed is the point."""
+    difference = abs(fit.permeability - base.permeability)
+    return difference > 1.96 * base.permeability_std and difference > MATERIAL * base.permeability
 
 
 @dataclass
@@ -187,10 +249,11 @@ class _Context:
 
     samples: Samples
     split: Split
+    seen: torch.Tensor  # train + validation samples
     candidates: dict[tuple[str, ...], Candidate]
     corrected: Candidate
     fit: dict[str, dict[str, float]]
-    noise_floor: float
+    noise: NoiseModel
     witness: float  # share of the hybrid network's learned error the named terms account for
 
 
@@ -211,59 +274,101 @@ def _explained_fraction(network: torch.Tensor, named: torch.Tensor) -> float:
     return 1.0 - (network - named).square().sum().item() / max(network.square().sum().item(), 1e-300)
 
 
-def _left_out_entry(term: str, chosen: tuple[str, ...], c: _Context, confounds: list[dict]) -> dict:
-    """The contract's ``left_out`` item of one named term, with its evidence in words."""
-    corrected = c.corrected
+def _confound(chosen: tuple[str, ...], other: tuple[str, ...], candidates: dict) -> dict:
+    """A confounded group: the two subsets (the empty one is the base model), what tells them apart, and
+    the K [m²] each gives."""
+    differing = sorted(set(chosen) ^ set(other))
+    names = [" + ".join(subset) or "base model" for subset in (chosen, other)]
+    return {
+        "terms": names,
+        "tell_apart": "; ".join(VOCABULARY[t].TELL_APART for t in differing),
+        "permeability": {name: candidates[subset].fit.permeability for name, subset in zip(names, (chosen, other))},
+    }
+
+
+def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: DiagnosisSettings, weak) -> dict:
+    """The contract's ``left_out`` item of one named term: values, intervals, grade, evidence in words."""
+    corrected = c.corrected.fit
     without = c.candidates.get(tuple(t for t in chosen if t != term), c.candidates[()])
+    held_out = held_out_curves(make_model, c.samples, c.seen, corrected, without.fit)
+    removal = without.fit.bic - corrected.bic
+    rivals = [" + ".join(t) or "the base model" for t in alternatives]
+    implausible = corrected.implausible.get(term)
+    verdict = grade(removal, rivals, implausible, held_out, s.bic_margin, s.heldout_margin, weak)
     gain = _test_rmse(without, c.samples, c.split) / c.fit["corrected"]["test_rmse"]
-    warnings = []
-    for name, value in corrected.fit.params[term].items():
-        std = corrected.fit.param_std[term][name]
-        if not math.isfinite(std) or abs(std) > POORLY_IDENTIFIED * abs(value):
-            warnings.append(f"{name} is poorly identified (std {std:.2g})")
-        if abs(corrected.fit.correlation_with_permeability[term][name]) > CORRELATED:
-            warnings.append(f"{name} is strongly correlated with K")
-    evidence = (
-        f"With {term} refitted jointly with K, the BIC falls by {without.fit.bic - corrected.fit.bic:.0f} and the "
-        f"validation RMS from {without.val_rmse * 1e9:.3g} to {corrected.val_rmse * 1e9:.3g} nN "
-        f"({corrected.val_rmse / c.noise_floor:.2f}× the noise floor); the named terms account for "
-        f"{100 * c.witness:.0f}% of the error the hybrid network learned."
-    )
-    others = [group for group in confounds if term in group["terms"][0]]
-    if others:
-        evidence += " Confounded with " + ", ".join(group["terms"][1] for group in others) + "."
-    if warnings:
-        evidence += " Warning: " + "; ".join(warnings) + "."
     return {
         "term": term,
-        "params": corrected.fit.params[term],
-        "param_std": corrected.fit.param_std[term],
-        "evidence": evidence,
+        "params": corrected.params[term],
+        "param_std": corrected.param_std[term],
+        "param_interval": _parameter_intervals(corrected, term, c),
+        "confidence": verdict.confidence,
+        "evidence": _evidence(term, without, removal, held_out, verdict, c),
         "test_rmse_gain": gain,
     }
 
 
-def summarise(d: Diagnosis, apparent: ApparentPermeability, threshold: float) -> str:
-    """One sentence a person can read."""
-    ratio = d.fit["base"]["val_rmse"] / d.noise_floor
-    if not d.detected:
-        return (
-            f"The base model explains every curve to the noise floor (validation RMS {ratio:.2f}× the noise "
-            f"floor, residual whiteness {d.whiteness['base']:.1f} ≤ {threshold:g})."
-        )
-    curves = ", ".join(m.curve for m in d.where) or "the curves"
-    lo = min((m.depth_from for m in d.where), default=math.nan) * 1e6
-    hi = max((m.depth_to for m in d.where), default=math.nan) * 1e6
-    worst = max((m.rms_residual / m.noise_floor for m in d.where), default=ratio)
+def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut | None, verdict: Grade, c) -> str:
+    corrected = c.corrected
     sentence = (
-        f"{curves} disagree with the base model between {lo:.2f} and {hi:.2f} µm, up to {worst:.1f}× the noise "
-        f"floor (whiteness {d.whiteness['base']:.0f}); the plateau permeability changes with speed by "
-        f"{apparent.slope:.2g} m² per decade ({apparent.slope_significance:.1f} standard errors). "
+        f"With {term} refitted jointly with K, the BIC under the noise model falls by {removal:.0f} and the "
+        f"validation RMS from {without.val_rmse * 1e9:.3g} to {corrected.val_rmse * 1e9:.3g} nN "
+        f"({corrected.val_rmse / c.noise.std:.2f}× the noise std)"
     )
-    if d.unexplained:
-        return sentence + "No term of the vocabulary explains the residual: the hybrid network's correction is kept."
-    names = " and ".join(entry["term"] for entry in d.left_out)
-    return sentence + (
-        f"The base model left out {names}: with it the validation RMS falls to "
-        f"{d.fit['corrected']['val_rmse'] / d.noise_floor:.2f}× the noise floor."
-    )
+    if held_out is not None:
+        sentence += f"; on curves left out of the fit it predicts {held_out.gain:.2f}× better"
+    sentence += f"; it accounts for {100 * c.witness:.0f}% of the error the hybrid network learned."
+    correlated = [
+        name for name, value in corrected.fit.correlation_with_permeability[term].items() if abs(value) > CORRELATED
+    ]
+    if correlated:
+        sentence += f" {', '.join(correlated)} is strongly correlated with K."
+    if verdict.reasons:
+        sentence += f" Confidence {verdict.confidence}: " + "; ".join(verdict.reasons) + "."
+    return sentence
+
+
+def _raw_interval(fit: PhysicsFit, raw_name: str, raw_std: float, c: _Context):
+    return profile_interval(fit, raw_name, raw_std, c.samples, c.split.train)
+
+
+def _parameter_intervals(fit: PhysicsFit, term: str, c: _Context) -> dict[str, list[float | None]]:
+    """95% profile-likelihood intervals of the term's parameters, physical units (None: not bounded)."""
+    module = fit.model.terms[term]
+    intervals = {}
+    for name, parameter in module.PARAMS.items():
+        value, std = fit.params[term][name], fit.param_std[term][name]
+        raw_std = std / abs(value) if parameter.log and value else std
+        low, high = _raw_interval(fit, f"terms.{term}.{module.raw_name(name)}", raw_std, c)
+        to_value = math.exp if parameter.log else float
+        intervals[name] = [None if low is None else to_value(low), None if high is None else to_value(high)]
+    return intervals
+
+
+def _permeability(c: _Context, alternatives: list[Candidate], unexplained: bool) -> dict:
+    """K of the base and corrected models; the corrected model's 95% profile interval, widened to cover
+    the 95% range of K of every candidate that explains the data as well (so a K the data cannot fix
+    shows). With structure left unexplained no interval holds (the model misses the data): None."""
+    corrected = c.corrected.fit
+    if unexplained:
+        return {
+            "base": c.candidates[()].fit.permeability,
+            "corrected": corrected.permeability,
+            "corrected_std": corrected.permeability_std,
+            "corrected_interval": [None, None],
+        }
+    raw_std = corrected.permeability_std / corrected.permeability
+    low, high = _raw_interval(corrected, PERMEABILITY, raw_std, c)
+    interval = [None if low is None else math.exp(low), None if high is None else math.exp(high)]
+    for other in alternatives:  # the base model too, when it is a rival: its own 95% range (Wald, in log K)
+        k, spread = other.fit.permeability, 1.96 * other.fit.permeability_std / other.fit.permeability
+        bounded = math.isfinite(spread)
+        interval = [
+            None if interval[0] is None or not bounded else min(interval[0], k * math.exp(-spread)),
+            None if interval[1] is None or not bounded else max(interval[1], k * math.exp(spread)),
+        ]
+    return {
+        "base": c.candidates[()].fit.permeability,
+        "corrected": corrected.permeability,
+        "corrected_std": corrected.permeability_std,
+        "corrected_interval": interval,
+    }

@@ -4,7 +4,9 @@ are structure or noise.
 The whiteness statistic of a curve splits its residual (in noise units, time order)
 into blocks of ``block`` samples: for white noise each block mean has variance
 1/block, so W = mean(block · mean²) ≈ 1; structure that persists over a block
-inflates it by the block length.
+inflates it by the block length. Correlated noise inflates it too, by κ² (the noise
+model's block-mean variance over the white expectation), so W is divided by κ²: noise
+reads ≈ 1 whatever its colour, and only structure beyond it counts.
 """
 
 from __future__ import annotations
@@ -34,15 +36,18 @@ def block_means(scaled: torch.Tensor, block: int) -> torch.Tensor:
     return torch.stack([scaled[a:b].mean() for a, b in zip(edges[:-1], edges[1:])]), edges
 
 
-def whiteness(scaled: torch.Tensor, block: int) -> float:
-    """W = mean over blocks of n_b·mean_b² for a residual in noise units (≈ 1 when white)."""
+def whiteness(scaled: torch.Tensor, block: int, inflation: float = 1.0) -> float:
+    """W = mean over blocks of n_b·mean_b² / κ² for a residual in noise units (≈ 1 for noise of
+    block-mean variance inflation κ² = ``inflation``)."""
     means, edges = block_means(scaled, block)
-    return (torch.diff(edges) * means.square()).mean().item()
+    return (torch.diff(edges) * means.square()).mean().item() / inflation
 
 
 def pooled_whiteness(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block: int) -> float:
-    """W over the blocks of every curve (``residual`` in N, on ``index``, time-ordered)."""
-    values = [whiteness(_curve_residual(samples, residual, index, i)[0], block) for i in range(len(samples.curve_ids))]
+    """W over the blocks of every curve (``residual`` in N, on ``index``, time-ordered), in units of the
+    samples' noise model."""
+    scaled = [_curve_residual(samples, residual, index, i)[0] for i in range(len(samples.curve_ids))]
+    values = [whiteness(s, block, samples.noise_inflation) for s in scaled if s.numel()]
     return sum(values) / len(values)
 
 
@@ -60,11 +65,13 @@ def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block:
     found = []
     for i, curve in enumerate(samples.curve_ids):
         scaled, where = _curve_residual(samples, residual, index, i)
-        w = whiteness(scaled, block)
+        if scaled.numel() == 0:
+            continue
+        w = whiteness(scaled, block, samples.noise_inflation)
         if w <= threshold:
             continue
         means, edges = block_means(scaled, block)
-        off = (means.abs() * torch.diff(edges).sqrt() > 3.0).nonzero().squeeze(1)
+        off = (means.abs() * torch.diff(edges).sqrt() > 3.0 * samples.noise_inflation**0.5).nonzero().squeeze(1)
         if off.numel() == 0:
             continue
         lo, hi = edges[off.min()].item(), edges[off.max() + 1].item()

@@ -12,12 +12,14 @@ fitting every pair whenever a single is not enough does not).
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
 
 from ptwin.diagnosis.locate import pooled_whiteness
+from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, fit_with_starts, rmse
 from ptwin.fitting.split import Split
 from ptwin.physics.samples import Samples
@@ -25,13 +27,34 @@ from ptwin.physics.samples import Samples
 
 @dataclass
 class Candidate:
-    fit: PhysicsFit
+    """One subset of terms, fitted with K on the train split (or the reason it could not be)."""
+
+    terms: tuple[str, ...]
+    fit: PhysicsFit | None  # None: the fit failed
     val_rmse: float  # [N]
-    whiteness: float  # of the residual on train + val
+    whiteness: float  # of the residual on train + val, in units of the noise model
+    failure: str | None = None  # why the fit failed
 
     @property
-    def terms(self) -> tuple[str, ...]:
-        return self.fit.terms
+    def usable(self) -> bool:
+        """A fit that can explain: it converged to physical values at which every term still acts."""
+        return self.fit is not None and self.fit.usable
+
+    @property
+    def without_effect(self) -> bool:
+        """A failed fit, or a physical one with a term that does nothing (ran off to a limit, or below the noise)."""
+        return self.fit is None or (self.fit.physical and bool(self.fit.degenerate))
+
+    @property
+    def state(self) -> str:
+        """'physical', or why this candidate cannot be an explanation."""
+        if self.fit is None:
+            return f"fit failed: {self.failure}"
+        if not self.fit.physical:
+            return "rejected: " + "; ".join(self.fit.violations.values())
+        if self.fit.degenerate:
+            return "; ".join(f"{term} does nothing ({why})" for term, why in self.fit.degenerate.items())
+        return "physical"
 
 
 def fit_candidates(
@@ -47,7 +70,8 @@ def fit_candidates(
     fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
 ) -> dict[tuple[str, ...], Candidate]:
     """Fits of the base model, every single term and, while the best subset of k − 1 terms leaves
-    structure, every subset of k ≤ ``max_terms`` terms, on the train split.
+    structure, every subset of k ≤ ``max_terms`` terms, on the train split. A fit that fails is kept
+    with its reason (``Candidate.failure``) and left out of every choice.
 
     ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are.
     """
@@ -56,19 +80,15 @@ def fit_candidates(
     candidates = {}
 
     def add(subset):
-        fit = fitted.get(subset) or fit_with_starts(make_model, subset, samples, split.train, iterations)
-        with torch.no_grad():
-            residual = fit.model(samples)[seen] - samples.force[seen]
-        structure = pooled_whiteness(samples, residual, seen, block)
-        candidate = Candidate(fit, rmse(fit.model, samples, split.val), structure)
+        candidate = _candidate(subset, fitted.get(subset), make_model, samples, split, seen, iterations, block)
         candidates[subset] = candidate
-        state = "physical" if fit.physical else "rejected: " + "; ".join(fit.violations.values())
         name = " + ".join(subset) or "base"
-        progress(f"  {name:<55s} BIC {fit.bic:12.1f}  val RMS {candidate.val_rmse * 1e9:7.3f} nN  ({state})")
+        figures = f"BIC {candidate.fit.bic:12.1f}  val RMS {candidate.val_rmse * 1e9:7.3f} nN" if candidate.fit else ""
+        progress(f"  {name:<55s} {figures:<37s}  ({candidate.state})")
 
     add(())
     for size in range(1, max_terms + 1):
-        previous = [c for t, c in candidates.items() if len(t) == size - 1 and c.fit.physical]
+        previous = [c for t, c in candidates.items() if len(t) == size - 1 and c.usable]
         best = min(previous, key=lambda c: c.fit.bic, default=None)
         if size > 1 and best is not None and best.whiteness <= threshold:
             break
@@ -77,20 +97,30 @@ def fit_candidates(
     return candidates
 
 
+def _candidate(subset, fit, make_model, samples, split, seen, iterations, block) -> Candidate:
+    try:
+        fit = fit or fit_with_starts(make_model, subset, samples, split.train, iterations)
+    except FitError as error:
+        return Candidate(subset, None, math.inf, math.inf, str(error))
+    with torch.no_grad():
+        residual = fit.model(samples)[seen] - samples.force[seen]
+    return Candidate(subset, fit, rmse(fit.model, samples, split.val), pooled_whiteness(samples, residual, seen, block))
+
+
 def choose(candidates: dict, bic_margin: float, heldout_margin: float) -> tuple[tuple[str, ...], list[str]]:
     """The accepted subset and the reasons for every term pruned on the way."""
-    physical = {t: c for t, c in candidates.items() if c.fit.physical}
-    chosen = min(physical, key=lambda t: physical[t].fit.bic)
+    usable = {t: c for t, c in candidates.items() if c.usable}
+    chosen = min(usable, key=lambda t: usable[t].fit.bic)
     notes = []
     pruned = True
     while pruned and chosen:
         pruned = False
         for term in chosen:
             without = tuple(t for t in chosen if t != term)
-            if without not in physical:
+            if without not in usable:
                 continue
-            bic_cost = physical[without].fit.bic - physical[chosen].fit.bic
-            heldout_cost = physical[without].val_rmse / physical[chosen].val_rmse - 1
+            bic_cost = usable[without].fit.bic - usable[chosen].fit.bic
+            heldout_cost = usable[without].val_rmse / usable[chosen].val_rmse - 1
             if bic_cost < bic_margin or heldout_cost < heldout_margin:
                 notes.append(
                     f"{term} pruned: removing it costs {bic_cost:.1f} BIC and {100 * heldout_cost:.1f}% of the "
@@ -102,7 +132,7 @@ def choose(candidates: dict, bic_margin: float, heldout_margin: float) -> tuple[
 
 
 def confounded(candidates: dict, chosen: tuple[str, ...], bic_margin: float, heldout_margin: float):
-    """Other physical subsets of the chosen size that explain the data as well."""
+    """Other usable subsets of the chosen size that explain the data as well."""
     if not chosen:
         return []
     best = candidates[chosen]
@@ -111,17 +141,24 @@ def confounded(candidates: dict, chosen: tuple[str, ...], bic_margin: float, hel
         for t, c in candidates.items()
         if len(t) == len(chosen)
         and t != chosen
-        and c.fit.physical
+        and c.usable
         and abs(c.fit.bic - best.fit.bic) < bic_margin
         and abs(c.val_rmse / best.val_rmse - 1) < heldout_margin
     ]
 
 
 def rejected(candidates: dict, bic_margin: float) -> list[dict]:
-    """Single terms that would have lowered the BIC but only with a non-physical parameter."""
+    """Single terms that would have lowered the BIC but only with a non-physical parameter, and
+    single terms whose fit failed (``why``: 'fit failed: …')."""
     base = candidates[()].fit.bic
-    return [
-        {"term": t[0], "params": c.fit.params[t[0]], "why": "; ".join(c.fit.violations.values())}
-        for t, c in candidates.items()
-        if len(t) == 1 and not c.fit.physical and base - c.fit.bic > bic_margin
-    ]
+    listed = []
+    for terms, c in candidates.items():
+        if len(terms) != 1:
+            continue
+        if c.fit is None:
+            listed.append({"term": terms[0], "params": {}, "why": c.state})
+        elif not c.fit.physical and base - c.fit.bic > bic_margin:
+            listed.append(
+                {"term": terms[0], "params": c.fit.params[terms[0]], "why": "; ".join(c.fit.violations.values())}
+            )
+    return listed

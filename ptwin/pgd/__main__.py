@@ -6,10 +6,13 @@ direct solve of the same discrete problem."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import hydra
+from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from ptwin.app import register, typed, user_errors_exit_2
+from ptwin.app import one_line_errors, register, typed
 from ptwin.pgd.build import build_basis
 from ptwin.pgd.cache import cache_path
 from ptwin.physics.fluid_accuracy import verify
@@ -19,7 +22,7 @@ register()
 
 @hydra.main(version_base="1.3", config_path="../../configs", config_name="pgd_build")
 def main(cfg: DictConfig) -> None:
-    with user_errors_exit_2():
+    with one_line_errors(Path(HydraConfig.get().runtime.output_dir)):
         settings = typed(cfg)
     config = settings.pgd
     out = settings.out or cache_path(config, settings.cache_dir)

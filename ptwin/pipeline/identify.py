@@ -12,11 +12,12 @@ from dataclasses import dataclass
 
 import torch
 
+from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, fit_physics
 from ptwin.fitting.pointwise import ApparentPermeability, apparent_permeability
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import SolidViscosity
-from ptwin.pipeline.prepare import Prepared
+from ptwin.pipeline.prepare import Prepared, UnsupportedSet
 from ptwin.pipeline.settings import OptimSettings
 
 VISCOUS = SolidViscosity  # the term of stage 2
@@ -26,20 +27,31 @@ VISCOUS = SolidViscosity  # the term of stage 2
 class Identification:
     base: PhysicsFit  # stage 1, on the train split
     apparent: ApparentPermeability
-    viscous: PhysicsFit  # stage 2, on the train split
+    viscous: PhysicsFit | None  # stage 2, on the train split (None: the fit failed)
     viscous_per_curve: dict[str, PhysicsFit]
+    viscous_term: str = VISCOUS.name
 
 
 def identify(prepared: Prepared, optim: OptimSettings, progress: Callable[[str], None] = print) -> Identification:
     samples, train, make_model = prepared.samples, prepared.split.train, prepared.make_model
     iterations = optim.physics_fit.iterations
     progress("stage 1: global K (elastic + Darcy) and the pointwise apparent K(w)")
-    base = fit_physics(make_model(), samples, train, iterations)
+    try:
+        base = fit_physics(make_model(), samples, train, iterations)
+    except FitError as error:
+        raise UnsupportedSet(
+            f"{prepared.recordings.path}: the base model cannot be fitted to these curves ({error}); check the "
+            f"probe radius, spring constant and sample thickness in meta.yaml"
+        ) from None
     p = optim.pointwise
     apparent = apparent_permeability(base.model, samples, base.permeability, p.iterations, p.plateau_from)
     progress("stage 2: Gauss–Newton on (K, gamma) with the viscous term, jointly and per speed")
     terms = (VISCOUS.name,)
-    viscous = fit_physics(make_model(terms, permeability=base.permeability), samples, train, iterations)
+    try:
+        viscous = fit_physics(make_model(terms, permeability=base.permeability), samples, train, iterations)
+    except FitError as error:
+        progress(f"stage 2: the fit with {VISCOUS.name} failed ({error})")
+        viscous = None
     per_curve = per_curve_fits(make_model, samples, train, terms, iterations)
     return Identification(base, apparent, viscous, per_curve)
 
@@ -54,11 +66,14 @@ def per_curve_fits(
     values: dict | None = None,
 ) -> dict[str, PhysicsFit]:
     """One fit of K (and, with ``free_terms``, the terms' parameters from ``values``) per curve,
-    on the samples of ``index`` in it: {curve: PhysicsFit}."""
+    on the samples of ``index`` in it: {curve: PhysicsFit}; a curve whose fit fails is left out."""
     fits = {}
     for i, curve in enumerate(samples.curve_ids):
         model = make_model(terms, values)
         for term in model.terms.values():
             term.requires_grad_(free_terms)
-        fits[curve] = fit_physics(model, samples, index[samples.curve[index] == i], iterations)
+        try:
+            fits[curve] = fit_physics(model, samples, index[samples.curve[index] == i], iterations)
+        except FitError:
+            continue
     return fits

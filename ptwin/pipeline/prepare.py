@@ -1,24 +1,32 @@
-"""Stage 0: load and check the recording set, its kinematics, the PGD basis, the split,
-and the factory every later stage builds its models with."""
+"""Stage 0: load and check the recording set, its kinematics and noise, the PGD basis,
+the split, and the factory every later stage builds its models with."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
+import numpy as np
 import torch
 
+from ptwin.data.evidence import SPOT_VARIATION, drag_from_baselines, spot_variation
 from ptwin.data.kinematics import CurveKinematics, curve_kinematics
-from ptwin.data.recordings import Meta, RecordingSet, load_recordings
+from ptwin.data.noise import NoiseModel, pooled
+from ptwin.data.recordings import Meta, RecordingError, RecordingSet, load_recordings
 from ptwin.fitting.hybrid import ErrorNetwork, HybridTwin
 from ptwin.fitting.split import Split, split_samples
 from ptwin.pgd.basis import Basis
 from ptwin.pgd.cache import cached_basis
+from ptwin.physics.contact import ContactNuisance
 from ptwin.physics.elastic import ReferenceCurve
 from ptwin.physics.fluid_force import FluidForce
 from ptwin.physics.model import ForceModel
 from ptwin.physics.samples import Samples
 from ptwin.pipeline.settings import ModelSettings, Settings
+
+
+class UnsupportedSet(RecordingError):
+    """A valid recording set that cannot support a diagnosis; the message says what to record."""
 
 
 @dataclass
@@ -32,6 +40,7 @@ class ModelFactory:
     permeability: float  # starting K [m²]
     device: str
     seed: int
+    contact_ids: tuple[str, ...] | None = None  # fitted curves whose contacts are nuisances (estimated)
 
     def __call__(
         self, terms: tuple[str, ...] = (), values: dict | None = None, permeability: float | None = None
@@ -39,8 +48,16 @@ class ModelFactory:
         """The base model with ``terms`` (starting at ``values``), K = ``permeability`` or the default."""
         meta = self.meta
         fluid = FluidForce(self.basis, permeability or self.permeability, meta.fluid_viscosity)
+        contact = ContactNuisance(self.contact_ids) if self.contact_ids is not None else None
         model = ForceModel(
-            self.reference, fluid, meta.probe_radius, meta.sample_thickness, terms, values, self.model.self_consistent
+            self.reference,
+            fluid,
+            meta.probe_radius,
+            meta.sample_thickness,
+            terms,
+            values,
+            self.model.self_consistent,
+            contact,
         )
         return model.to(self.device)
 
@@ -61,31 +78,91 @@ class Prepared:
     samples: Samples  # the non-reference curves: what every stage fits
     split: Split
     make_model: ModelFactory
+    noise: NoiseModel  # the set's
+    notes: list[str] = field(default_factory=list)  # evidence about the data, in sentences
 
     @property
     def noise_floor(self) -> float:
-        """The run's one noise floor [N]: the mean over every fitted sample of its curve's."""
-        return self.samples.noise_floor[self.samples.in_contact].mean().item()
+        """The run's one noise floor [N]: the mean over every fitted sample of its curve's σ."""
+        return self.noise.std
+
+    @property
+    def estimated_contact(self) -> bool:
+        return self.make_model.contact_ids is not None
 
 
 def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prepared:
     """Load and check the recordings, print their kinematics, get the cached basis, split."""
     recordings = load_recordings(settings.data.path)
     meta = recordings.meta
-    curves = curve_kinematics(recordings, smoothing=settings.data.smoothing)
-    progress(
-        f"{'curve':>6s} {'speed µm/s':>10s} {'contact':>8s} {'max depth µm':>12s} {'noise nN':>8s} {'offset nN':>9s}"
-    )
-    for c in curves:
-        progress(
-            f"{c.curve:>6s} {c.base_speed * 1e6:10.3g} {int(c.in_contact.sum()):8d} {c.depth.max() * 1e6:12.3f} "
-            f"{c.noise_floor * 1e9:8.3f} {c.baseline_offset * 1e9:9.3f}"
-        )
-    basis = cached_basis(settings.pgd, settings.cache_dir, progress)
+    curves = curve_kinematics(recordings, settings.data.smoothing, settings.diagnosis.block)
+    _print_kinematics(curves, progress)
     reference = next(c for c in curves if c.curve == meta.reference_curve)
-    samples = Samples.from_curves([c for c in curves if c is not reference]).to(settings.device)
+    fitted, notes = _fitted_curves(recordings, curves, reference)
+    noise = pooled([c.noise for c in curves], [max(int(c.in_contact.sum()), 1) for c in curves], _steps(curves))
+    noise = replace(noise, std=float(np.average([c.noise.std for c in fitted], weights=_counts(fitted))))
+    samples = Samples.from_curves(fitted, noise.inflation).to(settings.device)
+    basis = cached_basis(settings.pgd, settings.cache_dir, progress)
     s = settings.split
     split = split_samples(samples, tuple(s.fractions), s.mode, s.held_out_curve, settings.seed)
     law = ReferenceCurve(reference, settings.model.elastic_nodes, settings.model.elastic_smoothing)
-    factory = ModelFactory(meta, law, basis, settings.model, settings.permeability, settings.device, settings.seed)
-    return Prepared(recordings, curves, basis, samples, split, factory)
+    contact_ids = samples.curve_ids if meta.contact_point == "estimate" else None
+    factory = ModelFactory(
+        meta, law, basis, settings.model, settings.permeability, settings.device, settings.seed, contact_ids
+    )
+    notes += [sentence for sentence in (_spot_note(curves), drag_from_baselines(curves)) if sentence]
+    return Prepared(recordings, curves, basis, samples, split, factory, noise, notes)
+
+
+def _fitted_curves(recordings: RecordingSet, curves, reference) -> tuple[list[CurveKinematics], list[str]]:
+    """The curves every stage fits (all but the reference, with samples in contact no deeper than the
+    reference's: the elastic law is not known beyond), and notes on what was left out."""
+    speeds = sorted({c.base_speed for c in curves})
+    if len(speeds) < 2:
+        raise UnsupportedSet(
+            f"{recordings.path}: every curve is at {speeds[0] * 1e6:.3g} µm/s; one speed cannot separate the elastic "
+            f"law (read off the slowest curve) from K: record the same spot at two or more speeds, e.g. 3× apart"
+        )
+    deepest = reference.depth[reference.in_contact].max(initial=0.0)
+    fitted, notes = [], []
+    for curve in curves:
+        if curve is reference:
+            continue
+        beyond = curve.in_contact & (curve.depth > deepest)
+        if beyond.any():
+            notes.append(
+                f"{curve.curve}: {int(beyond.sum())} samples deeper than the reference curve ({deepest * 1e6:.2f} µm) "
+                f"are left out of the fits: the elastic law is not known there."
+            )
+            curve = replace(curve, in_contact=curve.in_contact & ~beyond)
+        if curve.in_contact.any():
+            fitted.append(curve)
+        else:
+            notes.append(f"{curve.curve}: no sample in contact within the reference curve's depth; left out.")
+    if not fitted:
+        raise UnsupportedSet(f"{recordings.path}: no curve besides the reference has samples in contact to fit")
+    return fitted, notes
+
+
+def _spot_note(curves) -> str | None:
+    variation = spot_variation(curves)
+    return variation.sentence() if variation is not None and variation.spread > SPOT_VARIATION else None
+
+
+def _counts(curves) -> list[int]:
+    return [int(c.in_contact.sum()) for c in curves]
+
+
+def _steps(curves) -> list[float]:
+    return [float(np.median(np.diff(c.time))) for c in curves]
+
+
+def _print_kinematics(curves: list[CurveKinematics], progress: Callable[[str], None]) -> None:
+    header = ("curve", "speed µm/s", "contact", "max depth µm", "noise nN", "κ²", "offset nN")
+    progress(" ".join(f"{title:>{width}s}" for title, width in zip(header, (6, 10, 8, 12, 8, 5, 9))))
+    for c in curves:
+        offset = "–" if c.baseline_offset is None else f"{c.baseline_offset * 1e9:.3f}"
+        progress(
+            f"{c.curve:>6s} {c.base_speed * 1e6:10.3g} {int(c.in_contact.sum()):8d} {c.depth.max() * 1e6:12.3f} "
+            f"{c.noise.std * 1e9:8.3f} {c.noise.inflation:5.2f} {offset:>9s}"
+        )

@@ -4,19 +4,28 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import torch
 
-from ptwin.diagnosis.diagnose import Diagnosis, diagnose
+from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, diagnose
+from ptwin.physics.terms import VOCABULARY
 from ptwin.pipeline.identify import Identification, identify, per_curve_fits
 from ptwin.pipeline.prepare import Prepared, prepare
 from ptwin.pipeline.settings import Settings
 from ptwin.pipeline.twin import train_twin
 from ptwin.reporting.figures import save_figures
 from ptwin.reporting.report import print_summary
-from ptwin.reporting.results import apparent_record, hybrid_stage, per_curve_record, physics_stage, write_outputs
+from ptwin.reporting.results import (
+    apparent_record,
+    contact_record,
+    hybrid_stage,
+    noise_record,
+    per_curve_record,
+    physics_stage,
+    write_outputs,
+)
 from ptwin.reporting.tensorboard import TrainingLog
 
 
@@ -41,20 +50,24 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     outcome = train_twin(prepared, base_k, noise, settings, output_dir, log.on_step, progress)
     log.end_training()
     iterations = settings.optim.physics_fit.iterations
+    candidates, notes = _candidates(prepared, settings)
     diagnosis = diagnose(
         prepared.make_model,
         samples,
         split,
         outcome.twin,
         identification.apparent,
-        settings.diagnosis,
+        candidates,
         iterations,
-        noise,
+        prepared.noise,
         progress,
         base_fit=identification.base,
+        notes=notes,
     )
     corrected_per_curve = _corrected_per_curve(prepared, diagnosis, iterations)
-    figures = save_figures(output_dir, samples, split, identification, outcome.twin, diagnosis, corrected_per_curve)
+    figures = save_figures(
+        output_dir, samples, split, identification, outcome.twin, diagnosis, corrected_per_curve, progress
+    )
     results = _results(prepared, identification, settings)
     results["stages"]["hybrid"] = hybrid_stage(outcome, samples, split, settings.optim.hybrid)
     results["noise_floor"] = noise
@@ -68,9 +81,22 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     hybrid = results["stages"]["hybrid"]
     log.close(figures, hparams, {"hparam/val_rmse": hybrid["val_rmse"], "hparam/test_rmse": hybrid["test_rmse"]})
     payload = write_outputs(output_dir, results, diagnosis, figures)
-    print_summary(results, payload)
+    print_summary(results, payload, progress)
     progress(f"results in {output_dir} ({results['seconds']:.1f} s)")
     return RunResult(results, payload, figures)
+
+
+def _candidates(prepared: Prepared, settings: Settings) -> tuple[DiagnosisSettings, list[str]]:
+    """The diagnosis settings for this set (with estimated contacts, the terms that are nuisances then
+    are no candidates) and the notes on the data, with why a term was not tried."""
+    notes = list(prepared.notes)
+    terms = settings.diagnosis.terms
+    if prepared.estimated_contact:
+        skipped = [t for t in terms if VOCABULARY[t].WITH_ESTIMATED_CONTACT]
+        notes += [f"{t} is not a candidate: {VOCABULARY[t].WITH_ESTIMATED_CONTACT}." for t in skipped]
+        terms = [t for t in terms if t not in skipped]
+        notes += [f"{t}: {VOCABULARY[t].CONTACT_CAVEAT}." for t in terms if VOCABULARY[t].CONTACT_CAVEAT]
+    return replace(settings.diagnosis, terms=terms), notes
 
 
 def _corrected_per_curve(prepared: Prepared, diagnosis: Diagnosis, iterations: int):
@@ -83,18 +109,19 @@ def _corrected_per_curve(prepared: Prepared, diagnosis: Diagnosis, iterations: i
 
 
 def _results(prepared: Prepared, identification: Identification, settings: Settings) -> dict:
-    """results.json of stages 1–2 and the split."""
+    """results.json of stages 1–2, the split, the noise and the contacts."""
     samples, split = prepared.samples, prepared.split
-    viscous = identification.viscous
-    term = viscous.terms[0]
+    stages = {"elastic_darcy": physics_stage(identification.base, samples, split)}
+    if identification.viscous is not None:
+        stages["viscous"] = physics_stage(identification.viscous, samples, split)
+    term = identification.viscous_term
     return {
         "recordings": str(prepared.recordings.path),
         "basis_hash": prepared.basis.config_hash,
         "split": {"mode": settings.split.mode, "held_out_curve": split.held_out_curve},
-        "stages": {
-            "elastic_darcy": physics_stage(identification.base, samples, split),
-            "viscous": physics_stage(viscous, samples, split),
-        },
+        "noise": noise_record(prepared.curves, prepared.noise),
+        "contact": contact_record(prepared.curves, identification.base),
+        "stages": stages,
         "apparent_permeability": apparent_record(identification.apparent),
-        "viscous_per_speed": per_curve_record(identification.viscous_per_curve, term, next(iter(viscous.params[term]))),
+        "viscous_per_speed": per_curve_record(identification.viscous_per_curve, term),
     }

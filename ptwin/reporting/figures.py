@@ -45,11 +45,14 @@ def _per_speed(samples, index, series: dict, ylabel: str, title: str, residual=F
     return figure
 
 
-def save_figures(output_dir: Path, samples, split, identification, twin, diagnosis, corrected_per_curve):
+def save_figures(
+    output_dir: Path, samples, split, identification, twin, diagnosis, corrected_per_curve, progress=print
+):
     """Write every figure as PNG into ``output_dir``; returns {name: figure} for TensorBoard.
 
     ``identification``: stages 1–2 (``base``, ``apparent``, ``viscous_per_curve``); ``twin``: the hybrid
-    twin; ``corrected_per_curve``: K per curve of the corrected model, or None.
+    twin; ``corrected_per_curve``: K per curve of the corrected model, or None. A figure matplotlib
+    cannot draw from these data is left out with one line saying so.
     """
     base, apparent = identification.base, identification.apparent
     with torch.no_grad():  # evaluated where the models live, plotted from the CPU
@@ -59,18 +62,20 @@ def save_figures(output_dir: Path, samples, split, identification, twin, diagnos
     samples = samples.to("cpu")
     split = Split(*(part.cpu() for part in (split.train, split.val, split.test)))
     index = torch.cat([split.train, split.val, split.test]).sort().values
-    figures = {
-        "fig3_curves_base_model": _per_speed(
+    builders = {
+        "fig3_curves_base_model": lambda: _per_speed(
             samples, index, {"elastic + Darcy": base_force}, "force [nN]", "Measured curves and the base model"
         ),
-        "fig4_apparent_permeability_depth": _apparent_against_depth(samples, index, apparent),
-        "fig5_permeability_speed": _permeability_against_speed(apparent, base, corrected_per_curve),
-        "fig6_viscosity_per_speed": _viscous_per_speed(apparent, identification.viscous_per_curve),
-        "fig7_hybrid_fit": _per_speed(
+        "fig4_apparent_permeability_depth": lambda: _apparent_against_depth(samples, index, apparent),
+        "fig5_permeability_speed": lambda: _permeability_against_speed(apparent, base, corrected_per_curve),
+        "fig6_viscosity_per_speed": lambda: _viscous_per_speed(
+            apparent, identification.viscous_per_curve, identification.viscous_term
+        ),
+        "fig7_hybrid_fit": lambda: _per_speed(
             samples, index, {"hybrid twin": physics + correction}, "force [nN]", "Measured curves and the hybrid twin"
         ),
-        "fig8_error_vs_network": _error_against_network(samples, split, index, physics, correction),
-        "fig9_residuals": _per_speed(
+        "fig8_error_vs_network": lambda: _error_against_network(samples, split, index, physics, correction),
+        "fig9_residuals": lambda: _per_speed(
             samples,
             index,
             {"base": base_force, "hybrid": physics + correction},
@@ -80,10 +85,18 @@ def save_figures(output_dir: Path, samples, split, identification, twin, diagnos
         ),
     }
     if diagnosis is not None:
-        figures.update(_diagnosis_figures(samples, index, base_force, correction, corrected, diagnosis.chosen))
-    for name, figure in figures.items():
-        figure.savefig(output_dir / f"{name}.png", dpi=110)
+        builders.update(_diagnosis_figures(samples, index, base_force, correction, corrected, diagnosis.chosen))
+    figures = {}
+    for name, build in builders.items():
+        try:
+            figure = build()
+            figure.savefig(output_dir / f"{name}.png", dpi=110)
+        except ValueError as error:  # e.g. no positive finite value to put on a log axis
+            progress(f"figure {name} not drawn: {str(error).splitlines()[0]}")
+            plt.close("all")
+            continue
         plt.close(figure)
+        figures[name] = figure
     return figures
 
 
@@ -99,24 +112,24 @@ def _apparent_against_depth(samples, index, apparent):
     return figure
 
 
-def _speeds(apparent) -> np.ndarray:
-    return np.array([row["base_speed"] for row in apparent.plateau.values()])
+def _speeds(apparent, curves) -> np.ndarray:
+    """Base speed [m/s] of each of ``curves``."""
+    return np.array([apparent.plateau[curve]["base_speed"] for curve in curves])
 
 
 def _permeability_against_speed(apparent, base, corrected_per_curve):
     figure, ax = plt.subplots(figsize=(6, 4))
-    rows = list(apparent.plateau.values())
-    speeds = _speeds(apparent)
+    rows = [row for row in apparent.plateau.values() if np.isfinite(row["mean"])]
     ax.errorbar(
-        speeds * MICRO,
+        [r["base_speed"] * MICRO for r in rows],
         [r["mean"] for r in rows],
-        yerr=[r["std_error"] for r in rows],
+        yerr=[r["std_error"] if np.isfinite(r["std_error"]) else 0.0 for r in rows],
         fmt="o",
         label="plateau K, base model",
     )
     if corrected_per_curve:
         ax.errorbar(
-            speeds * MICRO,
+            _speeds(apparent, corrected_per_curve) * MICRO,
             [f.permeability for f in corrected_per_curve.values()],
             yerr=[f.permeability_std for f in corrected_per_curve.values()],
             fmt="s",
@@ -133,11 +146,10 @@ def _permeability_against_speed(apparent, base, corrected_per_curve):
     return figure
 
 
-def _viscous_per_speed(apparent, fits):
+def _viscous_per_speed(apparent, fits, term):
     """Stage 2 per curve: the viscous term's parameter and K against speed."""
-    term = next(iter(fits.values())).terms[0]
     parameter, description = next(iter(VOCABULARY[term].PARAMS.items()))
-    speeds = _speeds(apparent)
+    speeds = _speeds(apparent, fits)
     figure, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.8))
     fits = list(fits.values())
     ax1.errorbar(
@@ -187,28 +199,33 @@ def _residual_map(ax, samples, index, residual, title, bins=24):
     return image
 
 
-def _diagnosis_figures(samples, index, base_force, correction, corrected, chosen):
-    figures = {}
+def _diagnosis_figures(samples, index, base_force, correction, corrected, chosen) -> dict:
+    """Builders of the diagnosis's figures."""
     label = " + ".join(chosen) or "no term accepted"
-    figures["diagnosis_curves"] = _per_speed(
-        samples,
-        index,
-        {"base": base_force, "corrected": corrected},
-        "residual [nN]",
-        f"Residuals: base model and corrected ({label})",
-        residual=True,
-    )
-    figure, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
-    _residual_map(axes[0], samples, index, base_force - samples.force, "base model")
-    image = _residual_map(axes[1], samples, index, corrected - samples.force, f"corrected ({label})")
-    figure.colorbar(image, ax=axes, label="mean residual / noise floor")
-    figures["diagnosis_residual_map"] = figure
-    figures["diagnosis_network_vs_named"] = _per_speed(
-        samples,
-        index,
-        {"network Y1": correction, "named terms": corrected - base_force},
-        "force [nN]",
-        "The hybrid network's learned error next to the named physics",
-        measured=False,
-    )
-    return figures
+
+    def residual_map():
+        figure, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=True)
+        _residual_map(axes[0], samples, index, base_force - samples.force, "base model")
+        image = _residual_map(axes[1], samples, index, corrected - samples.force, f"corrected ({label})")
+        figure.colorbar(image, ax=axes, label="mean residual / noise std")
+        return figure
+
+    return {
+        "diagnosis_curves": lambda: _per_speed(
+            samples,
+            index,
+            {"base": base_force, "corrected": corrected},
+            "residual [nN]",
+            f"Residuals: base model and corrected ({label})",
+            residual=True,
+        ),
+        "diagnosis_residual_map": residual_map,
+        "diagnosis_network_vs_named": lambda: _per_speed(
+            samples,
+            index,
+            {"network Y1": correction, "named terms": corrected - base_force},
+            "force [nN]",
+            "The hybrid network's learned error next to the named physics",
+            measured=False,
+        ),
+    }

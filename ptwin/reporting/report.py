@@ -1,79 +1,106 @@
-"""The run's summary table (stdout) and its human-readable report (report.md)."""
+"""The run's summary table (stdout) and its human-readable report (report.md).
+
+Every number goes through ``number``: a quantity that could not be determined is said
+in words, never printed as nan or inf.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from ptwin.diagnosis.words import number
+
 NANO = 1e9
+LABELS = {"elastic_darcy": "1 elastic + Darcy", "viscous": "2 + viscous (K, gamma)", "hybrid": "3 hybrid twin"}
 
 
-def _k(value, std=None):
-    return f"{value:.4g}" + (f" ± {std:.2g}" if std is not None else "")
+def _k(value, std=None) -> str:
+    return number(value, ".4g") + (f" ± {number(std, '.2g')}" if std is not None else "")
+
+
+def _nano(value) -> str:
+    return number(None if value is None else value * NANO, ".3f")
+
+
+def _interval(interval, scale: float = 1.0) -> str:
+    low, high = (None if v is None else v * scale for v in interval)
+    return f"[{number(low, '.3g', 'unbounded')}, {number(high, '.3g', 'unbounded')}]"
 
 
 def summary_rows(results: dict) -> list[tuple[str, str, str, str]]:
-    stages = results["stages"]
-    labels = {"elastic_darcy": "1 elastic + Darcy", "viscous": "2 + viscous (K, gamma)", "hybrid": "3 hybrid twin"}
     rows = []
-    for key, label in labels.items():
-        stage = stages[key]
-        rows.append(
-            (
-                label,
-                _k(stage["permeability"], stage.get("permeability_std")),
-                f"{stage['val_rmse'] * NANO:.3f}",
-                f"{stage['test_rmse'] * NANO:.3f}",
-            )
-        )
+    for key, label in LABELS.items():
+        stage = results["stages"].get(key)
+        if stage is not None:
+            permeability = _k(stage["permeability"], stage.get("permeability_std"))
+            rows.append((label, permeability, _nano(stage["val_rmse"]), _nano(stage["test_rmse"])))
     return rows
 
 
-def print_summary(results: dict, diagnosis: dict) -> None:
+def print_summary(results: dict, diagnosis: dict, progress=print) -> None:
+    """The identification chain and the diagnosis's K as a table, and its summary sentence."""
     rows = summary_rows(results)
     fit = diagnosis["fit"]["corrected"]
     permeability = diagnosis["permeability"]
-    rows.append(
-        (
-            "diagnosis: corrected",
-            _k(permeability["corrected"], permeability["corrected_std"]),
-            f"{fit['val_rmse'] * NANO:.3f}",
-            f"{fit['test_rmse'] * NANO:.3f}",
-        )
-    )
-    print(f"{'stage':<26s} {'K [m²]':>24s} {'val RMSE nN':>12s} {'test RMSE nN':>13s}")
+    corrected = _k(permeability["corrected"], permeability["corrected_std"])
+    rows.append(("diagnosis: corrected", corrected, _nano(fit["val_rmse"]), _nano(fit["test_rmse"])))
+    progress(f"{'stage':<26s} {'K [m²]':>24s} {'val RMSE nN':>12s} {'test RMSE nN':>13s}")
     for row in rows:
-        print(f"{row[0]:<26s} {row[1]:>24s} {row[2]:>12s} {row[3]:>13s}")
-    print(f"noise floor {results['noise_floor'] * NANO:.3f} nN")
-    print("diagnosis:", diagnosis["mismatch"]["summary"])
+        progress(f"{row[0]:<26s} {row[1]:>24s} {row[2]:>12s} {row[3]:>13s}")
+    progress(f"noise floor {_nano(results['noise_floor'])} nN")
+    progress(f"diagnosis: {diagnosis['mismatch']['summary']}")
 
 
 def write_report(output_dir: Path, results: dict, payload: dict, diagnosis, figures: dict) -> None:
     """report.md: the diagnosis in sentences and tables, the figures embedded."""
-    noise = payload["noise_floor"]
     lines = ["# ptwin report", "", f"Recordings: `{results['recordings']}`", "", "## Diagnosis", ""]
     lines += [payload["mismatch"]["summary"], ""]
-    if payload["mismatch"]["where"]:
-        lines += [
-            "| curve | depth from [µm] | depth to [µm] | RMS residual [nN] | noise floor [nN] |",
-            "|---|---|---|---|---|",
-        ]
-        for w in payload["mismatch"]["where"]:
-            lines.append(
-                f"| {w['curve']} | {w['depth_from'] * 1e6:.2f} | {w['depth_to'] * 1e6:.2f} | "
-                f"{w['rms_residual'] * NANO:.3f} | {w['noise_floor'] * NANO:.3f} |"
-            )
-        lines.append("")
+    lines += _where(payload) + _left_out(payload) + _others(payload)
+    if diagnosis is not None:
+        lines += [*(f"- {note}" for note in payload["notes"]), ""]
+        lines += _candidates(diagnosis)
+    lines += _fit(payload) + _chain(results)
+    lines += ["## Figures", "", *(f"![{name}]({name}.png)" for name in figures)]
+    (output_dir / "report.md").write_text("\n".join(lines) + "\n")
+
+
+def _where(payload: dict) -> list[str]:
+    if not payload["mismatch"]["where"]:
+        return []
+    lines = [
+        "| curve | depth from [µm] | depth to [µm] | RMS residual [nN] | noise std [nN] |",
+        "|---|---|---|---|---|",
+    ]
+    for w in payload["mismatch"]["where"]:
+        lines.append(
+            f"| {w['curve']} | {number(w['depth_from'] * 1e6, '.2f')} | {number(w['depth_to'] * 1e6, '.2f')} | "
+            f"{_nano(w['rms_residual'])} | {_nano(w['noise_floor'])} |"
+        )
+    return [*lines, ""]
+
+
+def _left_out(payload: dict) -> list[str]:
+    lines = []
     for entry in payload["left_out"]:
-        params = ", ".join(f"{k} = {v:.4g} ± {entry['param_std'][k]:.2g}" for k, v in entry["params"].items())
+        params = ", ".join(
+            f"{k} = {number(v, '.4g')} (95%: {_interval(entry['param_interval'][k])})"
+            for k, v in entry["params"].items()
+        )
         lines += [
-            f"**Left out: `{entry['term']}`** ({params}; test RMSE gain {entry['test_rmse_gain']:.2f}×).",
+            f"**Left out: `{entry['term']}`**, confidence **{entry['confidence']}** ({params}; test RMSE gain "
+            f"{number(entry['test_rmse_gain'], '.2f')}×).",
             entry["evidence"],
             "",
         ]
+    return lines
+
+
+def _others(payload: dict) -> list[str]:
+    lines = []
     for entry in payload["rejected"]:
-        params = ", ".join(f"{k} = {v:.4g}" for k, v in entry["params"].items())
-        lines += [f"Rejected: `{entry['term']}` ({params}): {entry['why']} — not physical, so not an explanation.", ""]
-    for entry in payload.get("confounded", []):
+        params = ", ".join(f"{k} = {number(v, '.4g')}" for k, v in entry["params"].items())
+        lines += [f"Rejected: `{entry['term']}` ({params or 'no values'}): {entry['why']}.", ""]
+    for entry in payload["confounded"]:
         lines += [
             f"Confounded: {entry['terms'][0]} and {entry['terms'][1]} explain the data equally well; "
             f"to tell them apart: {entry['tell_apart']}.",
@@ -85,44 +112,52 @@ def write_report(output_dir: Path, results: dict, payload: dict, diagnosis, figu
             "correction is kept and no term is claimed.",
             "",
         ]
-    if diagnosis is not None:
-        lines += [*(f"- {note}" for note in diagnosis.notes), ""]
-        lines += [
-            "### Candidate fits (train split; K refitted with each)",
-            "",
-            "| terms | BIC | val RMS [nN] | whiteness | parameters | physical |",
-            "|---|---|---|---|---|---|",
-        ]
-        for terms, c in diagnosis.candidates.items():
-            params = "; ".join(f"{k} = {v:.3g}" for p in c.fit.params.values() for k, v in p.items())
-            lines.append(
-                f"| {' + '.join(terms) or 'base'} | {c.fit.bic:.1f} | {c.val_rmse * NANO:.3f} | {c.whiteness:.1f} | "
-                f"{params} | {'yes' if c.fit.physical else '; '.join(c.fit.violations.values())} |"
-            )
-        lines.append("")
-    p = payload["permeability"]
-    lines += [
+    return lines
+
+
+def _candidates(diagnosis) -> list[str]:
+    lines = [
+        "### Candidate fits (train split; K refitted with each; BIC under the noise model)",
+        "",
+        "| terms | BIC | val RMS [nN] | whiteness | parameters | state |",
+        "|---|---|---|---|---|---|",
+    ]
+    for terms, c in diagnosis.candidates.items():
+        name = " + ".join(terms) or "base"
+        if c.fit is None:
+            lines.append(f"| {name} | – | – | – | – | {c.state} |")
+            continue
+        params = "; ".join(f"{k} = {number(v, '.3g')}" for p in c.fit.params.values() for k, v in p.items())
+        lines.append(
+            f"| {name} | {number(c.fit.bic, '.1f')} | {_nano(c.val_rmse)} | {number(c.whiteness, '.1f')} | "
+            f"{params} | {c.state} |"
+        )
+    return [*lines, ""]
+
+
+def _fit(payload: dict) -> list[str]:
+    noise, p = payload["noise"], payload["permeability"]
+    time = noise["correlation_time"]
+    correlation = number(None if time is None else time * 1e3, ".2g")
+    lines = [
         "## Fit",
         "",
-        f"Noise floor {noise * NANO:.3f} nN. Permeability: base {p['base']:.4g} m², corrected "
-        f"{p['corrected']:.4g} ± {p['corrected_std']:.2g} m².",
+        f"Noise: std {_nano(noise['std'])} nN, correlation time {correlation} ms, block-variance inflation "
+        f"{number(noise['inflation'], '.2f')} (from the {noise['source']}); every statistic above uses it.",
         "",
-        "| model | val RMSE [nN] | test RMSE [nN] | test / noise |",
+        f"Permeability: base {number(p['base'], '.4g')} m², corrected {_k(p['corrected'], p['corrected_std'])} m², "
+        f"95% interval {_interval(p['corrected_interval'])} m².",
+        "",
+        "| model | val RMSE [nN] | test RMSE [nN] | test / noise std |",
         "|---|---|---|---|",
     ]
     for name, fit in payload["fit"].items():
-        lines.append(
-            f"| {name} | {fit['val_rmse'] * NANO:.3f} | {fit['test_rmse'] * NANO:.3f} | "
-            f"{fit['test_rmse'] / noise:.2f} |"
-        )
-    lines += [
-        "",
-        "## Identification chain",
-        "",
-        "| stage | K [m²] | val RMSE [nN] | test RMSE [nN] |",
-        "|---|---|---|---|",
-    ]
+        ratio = None if fit["test_rmse"] is None else fit["test_rmse"] / noise["std"]
+        lines.append(f"| {name} | {_nano(fit['val_rmse'])} | {_nano(fit['test_rmse'])} | {number(ratio, '.2f')} |")
+    return [*lines, ""]
+
+
+def _chain(results: dict) -> list[str]:
+    lines = ["## Identification chain", "", "| stage | K [m²] | val RMSE [nN] | test RMSE [nN] |", "|---|---|---|---|"]
     lines += [f"| {' | '.join(row)} |" for row in summary_rows(results)]
-    lines += ["", "## Figures", ""]
-    lines += [f"![{name}]({name}.png)" for name in figures]
-    (output_dir / "report.md").write_text("\n".join(lines) + "\n")
+    return [*lines, ""]

@@ -4,11 +4,15 @@ and the run's files (results.json, diagnosis.json, report.md) written together."
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 from pathlib import Path
 
 import torch
 
+from ptwin.data.kinematics import CurveKinematics
+from ptwin.data.noise import NoiseModel
 from ptwin.diagnosis.diagnose import Diagnosis
+from ptwin.diagnosis.words import finite_or_none
 from ptwin.fitting.hybrid_training import HybridOutcome, HybridSettings, rmse_of
 from ptwin.fitting.physics_fit import PhysicsFit, rmse
 from ptwin.fitting.pointwise import ApparentPermeability
@@ -35,16 +39,33 @@ def apparent_record(apparent: ApparentPermeability) -> dict:
     return {"plateau": apparent.plateau, "slope_per_decade": apparent.slope, "slope_std": apparent.slope_std}
 
 
-def per_curve_record(fits: dict[str, PhysicsFit], term: str, parameter: str) -> dict:
-    """K and one parameter of ``term`` with its std, per curve."""
+def per_curve_record(fits: dict[str, PhysicsFit], term: str) -> dict:
+    """K and the parameters of ``term`` with their std, per curve."""
     return {
         curve: {
             "permeability": f.permeability,
-            parameter: f.params[term][parameter],
-            f"{parameter}_std": f.param_std[term][parameter],
+            **f.params[term],
+            **{f"{name}_std": std for name, std in f.param_std[term].items()},
         }
         for curve, f in fits.items()
     }
+
+
+def noise_record(curves: list[CurveKinematics], pooled: NoiseModel) -> dict:
+    """The noise model of every curve and of the set."""
+    return {
+        "set": asdict(pooled),
+        "curves": {c.curve: asdict(c.noise) for c in curves},
+    }
+
+
+def contact_record(curves: list[CurveKinematics], base: PhysicsFit) -> dict | None:
+    """Estimated contacts: each curve's estimate, removed baseline and the base fit's refinement relative to
+    the reference curve's [m, N, N/m]."""
+    if all(c.baseline is None for c in curves):
+        return None
+    refined = base.model.contact.values() if base.model.contact is not None else {}
+    return {c.curve: {**asdict(c.baseline), "refinement": refined.get(c.curve, 0.0)} for c in curves if c.baseline}
 
 
 def hybrid_stage(outcome: HybridOutcome, samples: Samples, split: Split, settings: HybridSettings) -> dict:
@@ -70,6 +91,6 @@ def write_outputs(output_dir: Path, results: dict, diagnosis: Diagnosis, figures
     payload = diagnosis.to_json()
     text = json.dumps(payload, indent=2, allow_nan=False, default=float, ensure_ascii=False)
     (output_dir / "diagnosis.json").write_text(text)
-    (output_dir / "results.json").write_text(json.dumps(results, indent=2, default=float))
+    (output_dir / "results.json").write_text(json.dumps(finite_or_none(results), indent=2, default=float))
     write_report(output_dir, results, payload, diagnosis, figures)
     return payload

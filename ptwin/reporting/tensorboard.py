@@ -32,7 +32,7 @@ class TrainingLog:
         self.samples, self.val, self.noise, self.settings = samples, val, noise, settings
         self.train_size = train.numel()
         total = len(settings.regularisations) * settings.iterations
-        self.bar = tqdm(total=total, desc="hybrid LM", unit="step")
+        self.bar = tqdm(total=total, desc="hybrid LM", unit="step", disable=None)  # None: only on a terminal
 
     def on_step(
         self, lambda_index: int, regularisation: float, step: Step, twin: HybridTwin, solver: LevenbergMarquardt

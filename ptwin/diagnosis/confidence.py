@@ -1,0 +1,131 @@
+"""How sure a named term is: evidence on held-out curves, and the grade.
+
+Held-out curves: each fitted curve in turn is left out, the model with the named set
+and the model without the term are refitted on the others (from the full fit, so a
+few LM steps), and both predict the curve they never saw. The gain is the ratio of
+their RMS over all held-out curves; the term's parameters across the folds show
+whether the curves agree on them.
+
+The grade (README, "Confidence"):
+- strong: removing the term costs ≥ 3 × the BIC margin under the noise model, no other
+  candidate explains the data as well, its values are plausible, and on held-out curves
+  it gains ≥ the held-out margin with parameters that agree across folds (relative
+  spread ≤ ``STABLE``);
+- moderate: at most one shortfall, and a mild one — a smaller BIC cost (still ≥ the
+  margin), too few curves to hold one out, or parameters that vary across folds;
+- weak: anything else, in particular a confounded, implausible or held-out-contradicted
+  term. The reasons are given in words either way.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import torch
+
+from ptwin.fitting.lm import FitError
+from ptwin.fitting.physics_fit import PhysicsFit, fit_physics
+from ptwin.physics.samples import Samples
+
+STABLE = 0.5  # largest relative spread of a parameter across folds
+FOLD_ITERATIONS = 20
+
+
+@dataclass
+class HeldOut:
+    """A named set against a smaller one, on curves each fitted without."""
+
+    gain: float  # RMS of the smaller set / RMS of the named set, pooled over the held-out curves
+    spread: dict[str, float]  # 'term.param' → (max − min)/|median| across folds
+    folds: int
+
+
+def held_out_curves(
+    make_model: Callable,
+    samples: Samples,
+    seen: torch.Tensor,
+    named: PhysicsFit,
+    smaller: PhysicsFit,
+) -> HeldOut | None:
+    """``named`` against ``smaller`` on curves left out one at a time (None with fewer than two fitted
+    curves, or when a fold cannot be fitted); fits start from the full fits' values."""
+    if len(samples.curve_ids) < 2:
+        return None
+    errors = {"named": 0.0, "smaller": 0.0}
+    values: dict[str, list[float]] = {}
+    for curve in range(len(samples.curve_ids)):
+        held = seen[samples.curve[seen] == curve]
+        rest = seen[samples.curve[seen] != curve]
+        for key, fit in (("named", named), ("smaller", smaller)):
+            model = make_model(fit.terms, fit.params, fit.permeability)
+            try:
+                refit = fit_physics(model, samples, rest, FOLD_ITERATIONS)
+            except FitError:
+                return None
+            with torch.no_grad():
+                errors[key] += (refit.model(samples)[held] - samples.force[held]).square().sum().item()
+            if key == "named":
+                for term, params in refit.params.items():
+                    for name, value in params.items():
+                        values.setdefault(f"{term}.{name}", []).append(value)
+    spread = {name: _spread(v) for name, v in values.items()}
+    gain = math.sqrt(errors["smaller"] / errors["named"]) if errors["named"] > 0 else math.inf
+    return HeldOut(gain, spread, len(samples.curve_ids))
+
+
+def _spread(values: list[float]) -> float:
+    ordered = sorted(values)
+    median = ordered[len(ordered) // 2]
+    return (ordered[-1] - ordered[0]) / abs(median) if median != 0 else math.inf
+
+
+@dataclass
+class Grade:
+    confidence: str  # strong, moderate or weak
+    reasons: list[str] = field(default_factory=list)  # the shortfalls, in words
+
+
+def grade(
+    removal_cost: float,
+    confounded_with: list[str],
+    implausible: str | None,
+    held_out: HeldOut | None,
+    bic_margin: float,
+    heldout_margin: float,
+    weak: str | None = None,
+) -> Grade:
+    """The confidence of one named term from its evidence (rules in the module docstring); ``weak``: a
+    reason that makes it weak whatever else (only the information criterion prefers it)."""
+    mild, serious = [], [weak] if weak else []
+    if removal_cost < 3 * bic_margin:
+        mild.append(f"removing it costs only {removal_cost:.0f} BIC under the noise model")
+    if confounded_with:
+        serious.append("the data explain as well with " + " or ".join(confounded_with))
+    if implausible:
+        serious.append(implausible)
+    if held_out is None:
+        mild.append("too few curves to test it on a curve it was not fitted to")
+    else:
+        if held_out.gain < 1 + heldout_margin:
+            serious.append(
+                f"on curves left out of the fit it improves the prediction by only "
+                f"{100 * (held_out.gain - 1):.0f}% (needs {100 * heldout_margin:.0f}%)"
+            )
+        unstable = {name: s for name, s in held_out.spread.items() if not s <= STABLE}
+        if unstable:
+            mild.append(
+                "its value changes between curves ("
+                + ", ".join(f"{name} by {_percent(s)}" for name, s in unstable.items())
+                + ")"
+            )
+    if not mild and not serious:
+        return Grade("strong")
+    if not serious and len(mild) == 1:
+        return Grade("moderate", mild)
+    return Grade("weak", serious + mild)
+
+
+def _percent(spread: float) -> str:
+    return f"{100 * spread:.0f}%" if math.isfinite(spread) else "more than its own size"

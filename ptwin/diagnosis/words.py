@@ -1,0 +1,108 @@
+"""The diagnosis in words: the summary sentence, and numbers that are never ``nan``.
+
+A quantity that could not be determined is said in words ("not determined") and is
+``null`` in the JSON (``finite_or_none``); no sentence carries ``nan`` or ``inf``.
+"""
+
+from __future__ import annotations
+
+import math
+
+MICRO = 1e6
+
+
+def finite_or_none(value):
+    """``value`` with every non-finite float (at any depth of dicts and lists) replaced by None."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {key: finite_or_none(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [finite_or_none(item) for item in value]
+    return value
+
+
+def number(value: float | None, spec: str, missing: str = "not determined") -> str:
+    """``value`` formatted by ``spec``, or ``missing`` if it is None or not finite."""
+    return format(value, spec) if value is not None and math.isfinite(value) else missing
+
+
+def summarise(d, apparent, threshold: float) -> str:
+    """One paragraph a person can read: where the base model misses, and what (if anything) explains it."""
+    ratio = d.fit["base"]["val_rmse"] / d.noise_floor
+    if not d.detected:
+        sentence = (
+            f"The base model explains every curve to the noise (validation RMS {ratio:.2f}× the noise std, "
+            f"residual whiteness {d.whiteness['base']:.1f} ≤ {threshold:g} in units of the noise's own correlation)."
+        )
+        return sentence + _permeability_not_fixed(d.confounded)
+    sentence = _where(d, ratio, threshold) + _trend(apparent)
+    if d.unexplained:
+        return sentence + (
+            "No term of the vocabulary explains the residual: the hybrid network's correction is kept, and K "
+            f"({d.permeability['corrected']:.3g} m²) comes from a model that misses the data, so no interval is given."
+        )
+    entries = d.left_out
+    names = " and ".join(entry["term"] for entry in entries)
+    after = f"{d.fit['corrected']['val_rmse'] / d.noise_floor:.2f}× the noise std"
+    if all(entry["confidence"] != "weak" for entry in entries):
+        grades = ", ".join(entry["confidence"] for entry in entries)
+        return (
+            sentence
+            + f"The base model left out {names} (confidence {grades}): with it the validation RMS falls to {after}."
+        )
+    sentence += f"{names} would explain it (the validation RMS falls to {after}), but the evidence is weak"
+    if d.confounded:
+        rivals = " or ".join(group["terms"][1] for group in d.confounded)
+        tell = "; ".join(group["tell_apart"] for group in d.confounded if group["tell_apart"])
+        sentence += f": the data cannot tell {names} from {rivals}"
+        return sentence + (f". To tell them apart, record {tell}." if tell else ".")
+    return sentence + "; see each term's evidence."
+
+
+def _permeability_not_fixed(groups: list[dict]) -> str:
+    """' K is not fixed by these data: …' for terms that explain the data as well as the base model with
+    another K; '' when there are none."""
+    if not groups:
+        return ""
+    ks = [
+        f"{name} explains them as well with K = {k:.3g} m²"
+        for group in groups
+        for name, k in group["permeability"].items()
+        if name != "base model"
+    ]
+    base = groups[0]["permeability"]["base model"]
+    tell = "; ".join(group["tell_apart"] for group in groups)
+    return (
+        f" K is not fixed by these data: {'; '.join(ks)} (the base model: {base:.3g} m²). "
+        f"To tell them apart, record {tell}."
+    )
+
+
+def _where(d, ratio: float, threshold: float) -> str:
+    if d.whiteness["base"] <= threshold:
+        return (
+            f"The base model leaves a small excess: its residual is within the noise (validation RMS {ratio:.2f}× the "
+            f"noise std, whiteness {d.whiteness['base']:.1f}), but under the noise model the information criterion "
+            f"prefers a term. "
+        )
+    if not d.where:
+        return f"The base model misses the curves by {ratio:.1f}× the noise std, in structure rather than noise. "
+    curves = ", ".join(m.curve for m in d.where)
+    lo = min(m.depth_from for m in d.where) * MICRO
+    hi = max(m.depth_to for m in d.where) * MICRO
+    worst = max(m.rms_residual / m.noise_floor for m in d.where)
+    return (
+        f"{curves} disagree with the base model between {lo:.2f} and {hi:.2f} µm, up to {worst:.1f}× the noise "
+        f"std (whiteness {d.whiteness['base']:.0f} in units of the noise's own correlation). "
+    )
+
+
+def _trend(apparent) -> str:
+    """The trend of the plateau permeability with speed, where there is one to measure."""
+    if not (math.isfinite(apparent.slope) and math.isfinite(apparent.slope_std)):
+        return "The plateau permeability cannot be compared across speeds (fewer than two fitted speeds). "
+    return (
+        f"The plateau permeability changes with speed by {apparent.slope:.2g} m² per decade "
+        f"({number(apparent.slope_significance, '.1f')} standard errors). "
+    )
