@@ -128,3 +128,43 @@ def test_mangled_files_load_whole_or_fail_with_a_recording_error(tmp_path, data,
     # Loaded: nothing dropped, every number finite.
     assert len(loaded.curves) == len(curves)
     assert np.isfinite(loaded.curves[["base_speed", "time", "z", "force"]].to_numpy()).all()
+
+
+def ramp_and_hold(samples=40):
+    curves = good_curves(samples)
+    hold = curves[curves["curve"] == "v8"].copy()
+    hold["curve"], hold["segment"] = "v8h", np.where(np.arange(len(hold)) < samples // 2, "approach", "hold")
+    hold.loc[hold["segment"] == "hold", "base_speed"] = 0.0
+    hold.loc[hold["segment"] == "hold", "z"] = hold["z"].iloc[samples // 2 - 1]
+    return pd.concat([curves.assign(segment="approach"), hold], ignore_index=True)
+
+
+def test_a_ramp_and_hold_set_loads_whole(tmp_path):
+    write_recordings(tmp_path, META, ramp_and_hold())
+    loaded = load_recordings(tmp_path)
+    assert loaded.curve_ids == ["v0.5", "v8", "v8h"]
+    assert list(dict.fromkeys(loaded.curve("v8h")["segment"])) == ["approach", "hold"]
+
+
+@pytest.mark.parametrize(
+    ("mangle", "message"),
+    [
+        (lambda c: c.assign(segment=c["segment"].where(c.index != 90, "dwell")), r"row 92, column segment: 'dwell'"),
+        (
+            lambda c: c.assign(base_speed=c["base_speed"].where(c.index != 110, 1e-6)),
+            r"row 112, curve 'v8h': base_speed changes within the hold",
+        ),
+        (
+            lambda c: c.assign(base_speed=np.where(c["segment"] == "hold", 1e-6, c["base_speed"])),
+            r"curve 'v8h': base_speed 1e-06 on the hold; it must be 0",
+        ),
+        (
+            lambda c: c.assign(segment=c["segment"].where(c.index != 110, "approach")),
+            r"row 112, curve 'v8h': segment 'approach' comes after 'hold'",
+        ),
+    ],
+)
+def test_bad_segments_get_one_located_line(tmp_path, mangle, message):
+    write_recordings(tmp_path, META, mangle(ramp_and_hold()))
+    with pytest.raises(RecordingError, match=message):
+        load_recordings(tmp_path)

@@ -2,8 +2,13 @@
 
 - ``w = z − F/k_s``; ``R = sqrt(ρ² − (ρ − w)²)`` (0 before contact); ``H = H0 − w``.
 - ``U = dw/dt`` by local linear regression over a centred window of ``smoothing``
-  (fraction of the curve's samples, ≈5%): a raw finite difference (paper eq. 7) turns
-  force noise σ/k_s into a velocity noise ~σ/(k_s Δt) that invents rate effects.
+  (fraction of the approach's samples, ≈5%): a raw finite difference (paper eq. 7) turns
+  force noise σ/k_s into a velocity noise ~σ/(k_s Δt) that invents rate effects. Windows
+  stay within a segment (approach, hold, retract), so the ramp/hold corner is not smeared;
+  still, the tip's stop at the corner is faster than a window, so the first half-window of
+  a hold is left out of the fits (its velocity is not resolved), counted in ``settling``.
+- Fits use the approach and the hold; a retract is kept but left out (adhesion and
+  unloading are not in the vocabulary).
 - The noise of each curve (``ptwin.data.noise``): measured on its pre-contact baseline
   where there is one, else from second differences.
 - Known contact (``contact_point: known``): the pre-contact baseline offset (mean force at
@@ -22,7 +27,7 @@ import pandas as pd
 
 from ptwin.data.contact import Baseline, NoBaseline, estimate_baseline
 from ptwin.data.noise import NoiseModel, curve_noise
-from ptwin.data.recordings import RecordingError, RecordingSet
+from ptwin.data.recordings import SEGMENTS, RecordingError, RecordingSet
 
 
 @dataclass
@@ -30,7 +35,7 @@ class CurveKinematics:
     """Per-sample arrays of one curve (SI units, float64, all samples kept)."""
 
     curve: str
-    base_speed: float  # [m/s]
+    base_speed: float  # the approach's base speed [m/s]: the curve's nominal speed
     time: np.ndarray  # [s]
     z: np.ndarray  # base displacement [m]
     force: np.ndarray  # measured force [N]
@@ -38,11 +43,14 @@ class CurveKinematics:
     contact_radius: np.ndarray  # R [m]
     velocity: np.ndarray  # U [m/s]
     height: np.ndarray  # H [m]
-    in_contact: np.ndarray  # bool: samples used in fits (z ≥ 0 and w > 0)
+    in_contact: np.ndarray  # bool: samples used in fits (z ≥ 0 and w > 0, not on a retract nor settling)
+    segment: np.ndarray  # int: index into SEGMENTS (0 approach, 1 hold, 2 retract)
+    base_speeds: np.ndarray  # each sample's base speed [m/s] (0 in a hold)
     noise: NoiseModel
     baseline_offset: float | None  # pre-contact force [N]: its mean (known contact), the removed line's at
     # contact (estimated contact), None without pre-contact samples
     baseline: Baseline | None  # the estimated contact and removed baseline (contact_point: estimate)
+    settling: int = 0  # samples at the start of holds left out of fits (velocity not resolved there)
 
     @property
     def noise_floor(self) -> float:
@@ -72,6 +80,18 @@ def window_line(x: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray, at
     return value, slope
 
 
+def segmented_derivative(time: np.ndarray, values: np.ndarray, window: int, segment: np.ndarray) -> np.ndarray:
+    """``smoothed_derivative`` within each run of equal ``segment`` codes, never across two."""
+    result = np.empty_like(values)
+    edges = np.flatnonzero(np.r_[True, segment[1:] != segment[:-1], True])
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        if hi - lo >= 2:
+            result[lo:hi] = smoothed_derivative(time[lo:hi], values[lo:hi], window)
+        else:
+            result[lo:hi] = 0.0  # one sample alone in its segment has no slope of its own
+    return result
+
+
 def smoothed_derivative(time: np.ndarray, values: np.ndarray, window: int) -> np.ndarray:
     """Slope of a least-squares line over a centred window of ``window`` samples.
 
@@ -93,39 +113,65 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
     for curve_id in recordings.curve_ids:
         rows: pd.DataFrame = recordings.curve(curve_id)
         time, z, force = (rows[c].to_numpy(dtype=np.float64) for c in ("time", "z", "force"))
+        segment = _segment_codes(rows)
+        approach = segment == 0
         baseline = None
         if meta.contact_point == "estimate":
-            try:
-                baseline = estimate_baseline(z, force, meta.spring_constant)
-            except NoBaseline as error:
-                raise RecordingError(
-                    f"{recordings.path / 'curves.csv'}: curve {curve_id!r}: no baseline to estimate its contact "
-                    f"point from ({error}); record the approach from further away, or give z from the contact "
-                    f"and contact_point: known"
-                ) from None
+            baseline = _estimated_baseline(recordings, curve_id, z[approach], force[approach])
             z, force = baseline.remove(z, force)
         depth = z - force / meta.spring_constant
-        window = max(5, int(round(smoothing * len(rows))))
-        pre_contact = z < 0
-        noise = curve_noise(time, z, force, z <= 0.25 * min(z[0], 0.0), block)
+        window = max(5, int(round(smoothing * approach.sum())))  # the approach's: a long hold would widen it
+        pre_contact = (z < 0) & approach
+        noise = curve_noise(time, z, force, approach & (z <= 0.25 * min(z[0], 0.0)), block)
         if meta.noise_std:
             noise = replace(noise, std=meta.noise_std, source=f"noise_std of meta.yaml; correlation: {noise.source}")
         offset = baseline.offset if baseline else (float(force[pre_contact].mean()) if pre_contact.any() else None)
+        speeds = rows["base_speed"].to_numpy(dtype=np.float64)
+        settling = _settling(segment, window // 2)
         result.append(
             CurveKinematics(
                 curve=curve_id,
-                base_speed=float(rows["base_speed"].iloc[0]),
+                base_speed=float(speeds[approach][0]) if approach.any() else float(np.abs(speeds).max()),
                 time=time,
                 z=z,
                 force=force,
                 depth=depth,
                 contact_radius=contact_radius(depth, meta.probe_radius),
-                velocity=smoothed_derivative(time, depth, window),
+                velocity=segmented_derivative(time, depth, window, segment),
                 height=meta.sample_thickness - depth,
-                in_contact=(~pre_contact) & (depth > 0),
+                in_contact=(z >= 0) & (depth > 0) & (segment < SEGMENTS.index("retract")) & ~settling,
+                segment=segment,
+                base_speeds=speeds,
                 noise=noise,
                 baseline_offset=offset,
                 baseline=baseline,
+                settling=int(settling.sum()),
             )
         )
     return result
+
+
+def _settling(segment: np.ndarray, samples: int) -> np.ndarray:
+    """The first ``samples`` of every hold."""
+    hold = segment == SEGMENTS.index("hold")
+    starts = np.flatnonzero(hold & ~np.r_[False, hold[:-1]])
+    settling = np.zeros_like(hold)
+    for start in starts:
+        settling[start : start + samples] = True
+    return settling & hold
+
+
+def _segment_codes(rows: pd.DataFrame) -> np.ndarray:
+    if "segment" not in rows:
+        return np.zeros(len(rows), dtype=np.int64)
+    return rows["segment"].map(SEGMENTS.index).to_numpy(dtype=np.int64)
+
+
+def _estimated_baseline(recordings: RecordingSet, curve_id: str, z: np.ndarray, force: np.ndarray) -> Baseline:
+    try:
+        return estimate_baseline(z, force, recordings.meta.spring_constant)
+    except NoBaseline as error:
+        raise RecordingError(
+            f"{recordings.path / 'curves.csv'}: curve {curve_id!r}: no baseline to estimate its contact point from "
+            f"({error}); record the approach from further away, or give z from the contact and contact_point: known"
+        ) from None

@@ -17,6 +17,9 @@ import yaml
 
 FORMAT = "ptwin-recordings/1"
 COLUMNS = ("curve", "base_speed", "time", "z", "force")
+SEGMENTS = ("approach", "hold", "retract")  # the optional column's values, in the order a curve has them
+SPEED_SIGN = {"approach": lambda v: v > 0, "hold": lambda v: v == 0, "retract": lambda v: v < 0}
+SPEED_RULE = {"approach": "> 0 (into the sample)", "hold": "0 (the base is fixed)", "retract": "< 0 (out of it)"}
 MIN_SAMPLES = 20
 # Magnitudes no AFM indentation reaches in SI: a value past them is in other units.
 _PLAUSIBLE = {"z": (1e-3, "m (micrometres?)"), "force": (1e-3, "N (nanonewtons?)"), "base_speed": (1e-2, "m/s (µm/s?)")}
@@ -145,6 +148,14 @@ def _read_curves(file: Path, meta: Meta) -> pd.DataFrame:
     if frame.empty:
         raise RecordingError(f"{file}: no samples below the header")
     frame["curve"] = frame["curve"].str.strip()
+    if "segment" in frame:
+        frame["segment"] = frame["segment"].str.strip()
+        bad = ~frame["segment"].isin(SEGMENTS)
+        if bad.any():
+            row = int(np.argmax(bad.to_numpy()))
+            raise RecordingError(
+                f"{file}: row {row + 2}, column segment: {frame['segment'].iloc[row]!r}; use approach, hold or retract"
+            )
     for column in COLUMNS[1:]:
         values = pd.to_numeric(frame[column].str.strip(), errors="coerce")
         bad = ~np.isfinite(values.to_numpy(dtype=float))
@@ -179,40 +190,67 @@ def _check_curves(file: Path, frame: pd.DataFrame, meta: Meta) -> None:
             )
         first_seen[curve] = start
     for start, stop in zip(starts, np.r_[starts[1:], len(frame)]):
-        curve = ids[start]
-        rows = frame.iloc[start:stop]
-        if len(rows) < MIN_SAMPLES:
-            raise RecordingError(f"{file}: curve {curve!r} has {len(rows)} samples, at least {MIN_SAMPLES} are needed")
-        step = np.diff(rows["time"].to_numpy())
-        if (step <= 0).any():
-            row = start + int(np.argmax(step <= 0)) + 1
-            raise RecordingError(
-                f"{file}: row {row + 2}, curve {curve!r}: time does not increase; sort the curve by time or fix the row"
-            )
-        speeds = rows["base_speed"].to_numpy()
-        if not np.allclose(speeds, speeds[0], rtol=1e-9, atol=0):
-            raise RecordingError(
-                f"{file}: curve {curve!r}: base_speed changes within the curve; one nominal speed per curve"
-            )
-        if speeds[0] <= 0:
-            raise RecordingError(
-                f"{file}: curve {curve!r}: base_speed {speeds[0]:g} must be > 0 (approach, into the sample)"
-            )
-        depth = rows["z"].to_numpy() - rows["force"].to_numpy() / meta.spring_constant
-        if depth.max() >= meta.sample_thickness:
-            row = start + int(depth.argmax())
-            raise RecordingError(
-                f"{file}: row {row + 2}, curve {curve!r}: depth {depth.max():.3g} m reaches the sample thickness "
-                f"{meta.sample_thickness:.3g} m; check sample_thickness in meta.yaml (and z, force, spring constant)"
-            )
-        if depth.max() > meta.probe_radius:
-            row = start + int(depth.argmax())
-            raise RecordingError(
-                f"{file}: row {row + 2}, curve {curve!r}: depth {depth.max():.3g} m exceeds the probe radius "
-                f"{meta.probe_radius:.3g} m; check z, force and the spring constant in meta.yaml"
-            )
+        _check_curve(file, frame.iloc[start:stop], start, meta)
     if meta.reference_curve not in first_seen:
         raise RecordingError(
             f"{file.parent / 'meta.yaml'}: reference_curve {meta.reference_curve!r} is not a curve of curves.csv "
             f"(curves: {', '.join(sorted(first_seen))})"
         )
+
+
+def _check_curve(file: Path, rows: pd.DataFrame, start: int, meta: Meta) -> None:
+    """One curve's rows (``start``: the index of its first row in the file's table)."""
+    curve = rows["curve"].iloc[0]
+    if len(rows) < MIN_SAMPLES:
+        raise RecordingError(f"{file}: curve {curve!r} has {len(rows)} samples, at least {MIN_SAMPLES} are needed")
+    step = np.diff(rows["time"].to_numpy())
+    if (step <= 0).any():
+        row = start + int(np.argmax(step <= 0)) + 1
+        raise RecordingError(
+            f"{file}: row {row + 2}, curve {curve!r}: time does not increase; sort the curve by time or fix the row"
+        )
+    _check_segments(file, rows, start)
+    depth = rows["z"].to_numpy() - rows["force"].to_numpy() / meta.spring_constant
+    if depth.max() >= meta.sample_thickness:
+        row = start + int(depth.argmax())
+        raise RecordingError(
+            f"{file}: row {row + 2}, curve {curve!r}: depth {depth.max():.3g} m reaches the sample thickness "
+            f"{meta.sample_thickness:.3g} m; check sample_thickness in meta.yaml (and z, force, spring constant)"
+        )
+    if depth.max() > meta.probe_radius:
+        row = start + int(depth.argmax())
+        raise RecordingError(
+            f"{file}: row {row + 2}, curve {curve!r}: depth {depth.max():.3g} m exceeds the probe radius "
+            f"{meta.probe_radius:.3g} m; check z, force and the spring constant in meta.yaml"
+        )
+
+
+def _check_segments(file: Path, rows: pd.DataFrame, start: int) -> None:
+    """Segments in time order (approach, hold, retract), each contiguous, at one base speed: > 0 on the
+    approach, 0 in a hold, < 0 on the retract."""
+    curve = rows["curve"].iloc[0]
+    names = rows["segment"].to_numpy() if "segment" in rows else np.full(len(rows), SEGMENTS[0])
+    order = np.array([SEGMENTS.index(name) for name in names])
+    if (np.diff(order) < 0).any():
+        row = start + int(np.argmax(np.diff(order) < 0)) + 1
+        raise RecordingError(
+            f"{file}: row {row + 2}, curve {curve!r}: segment {names[row - start]!r} comes after "
+            f"{names[row - start - 1]!r}; a curve's segments run approach, hold, retract"
+        )
+    speeds = rows["base_speed"].to_numpy()
+    for code, name in enumerate(SEGMENTS):
+        mine = order == code
+        if not mine.any():
+            continue
+        first = start + int(np.argmax(mine))
+        changed = mine & ~np.isclose(speeds, speeds[mine][0], rtol=1e-9, atol=0)
+        if changed.any():
+            raise RecordingError(
+                f"{file}: row {start + int(np.argmax(changed)) + 2}, curve {curve!r}: base_speed changes within the "
+                f"{name}; one nominal speed per segment (mark a hold with segment: hold)"
+            )
+        if not SPEED_SIGN[name](speeds[mine][0]):
+            raise RecordingError(
+                f"{file}: row {first + 2}, curve {curve!r}: base_speed {speeds[mine][0]:g} on the {name}; it must be "
+                f"{SPEED_RULE[name]}"
+            )

@@ -11,6 +11,7 @@ import torch
 
 from ptwin.data.noise import NoiseModel
 from ptwin.diagnosis.confidence import Grade, HeldOut, grade, held_out_curves
+from ptwin.diagnosis.design import ExperimentDesign, Prediction
 from ptwin.diagnosis.intervals import profile_interval
 from ptwin.diagnosis.locate import Mismatch, locate
 from ptwin.diagnosis.name import Candidate, choose, confounded, fit_candidates, rejected
@@ -43,6 +44,7 @@ class DiagnosisSettings:
     heldout_margin: float = 0.10  # ... and at least this fraction of the validation RMS
     block: int = 50  # samples per block of the whiteness test
     whiteness_threshold: float = 5.0  # block statistic above which a residual is structure, not noise
+    design: bool = True  # propose the recording that separates confounded candidates (simulated; seconds)
 
     def __post_init__(self):
         unknown = [t for t in self.terms if t not in VOCABULARY]
@@ -68,6 +70,7 @@ class Diagnosis:
     noise: NoiseModel
     permeability: dict  # base, corrected, corrected_std, corrected_interval [m²]
     notes: list[str] = field(default_factory=list)
+    predictions: list[Prediction] = field(default_factory=list)  # of each proposed next experiment
 
     @property
     def base(self) -> Candidate:
@@ -127,10 +130,12 @@ def diagnose(
     progress: Callable[[str], None] = print,
     base_fit: PhysicsFit | None = None,
     notes: list[str] | None = None,
+    design: ExperimentDesign | None = None,
 ) -> Diagnosis:
     """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); candidate fits run
     ``iterations`` LM steps; ``noise`` is the set's noise model; ``base_fit``: the base model already
-    fitted so on ``split.train``, if any; ``notes``: evidence about the data, in sentences."""
+    fitted so on ``split.train``, if any; ``notes``: evidence about the data, in sentences; ``design``:
+    what proposes the next experiment of each confounded group (None: none proposed)."""
     s = settings
     seen = torch.cat([split.train, split.val]).sort().values
     progress("diagnosis: fitting the base model and the candidate terms (K refitted with each)")
@@ -150,6 +155,14 @@ def diagnose(
     fit = _fit_table(samples, split, base, corrected, hybrid)
     rivals = _rivals(candidates, pick, s)
     confounds = [_confound(chosen, other, candidates) for other in rivals]
+    predictions = []
+    if design is not None and confounds:
+        progress("diagnosis: simulating each confounded candidate under the experiments that could separate them")
+        for group, other in zip(confounds, rivals):
+            proposal = design.propose(group["terms"], [corrected.fit, candidates[other].fit])
+            if proposal is not None:
+                group["next_experiment"], prediction = proposal
+                predictions.append(prediction)
     progress("diagnosis: the named terms on curves left out of the fit, and intervals under the noise model")
     with torch.no_grad():
         learned = hybrid.network(samples)[seen]
@@ -172,6 +185,7 @@ def diagnose(
         noise=noise,
         permeability=_permeability(context, [candidates[t] for t in rivals], pick.unexplained),
         notes=notes,
+        predictions=predictions,
     )
     diagnosis.summary = summarise(diagnosis, apparent, s.whiteness_threshold)
     return diagnosis

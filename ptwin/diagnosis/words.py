@@ -54,7 +54,7 @@ def summarise(d, apparent, threshold: float) -> str:
     sentence += f"{names} would explain it (the validation RMS falls to {after}), but the evidence is weak"
     if d.confounded:
         rivals = " or ".join(group["terms"][1] for group in d.confounded)
-        tell = "; ".join(group["tell_apart"] for group in d.confounded if group["tell_apart"])
+        tell = "; ".join(_record(group) for group in d.confounded if group["tell_apart"])
         sentence += f": the data cannot tell {names} from {rivals}"
         return sentence + (f". To tell them apart, record {tell}." if tell else ".")
     return sentence + "; see each term's evidence."
@@ -72,11 +72,17 @@ def _permeability_not_fixed(groups: list[dict]) -> str:
         if name != "base model"
     ]
     base = groups[0]["permeability"]["base model"]
-    tell = "; ".join(group["tell_apart"] for group in groups)
+    tell = "; ".join(_record(group) for group in groups)
     return (
         f" K is not fixed by these data: {'; '.join(ks)} (the base model: {base:.3g} m²). "
         f"To tell them apart, record {tell}."
     )
+
+
+def _record(group: dict) -> str:
+    """What to record to tell a confounded group apart: the proposed experiment, else the term's hint."""
+    proposal = group.get("next_experiment")
+    return proposal["sentence"] if proposal else group["tell_apart"]
 
 
 def _where(d, ratio: float, threshold: float) -> str:

@@ -22,7 +22,7 @@ from ptwin.physics.samples import Samples
 ACTIVATIONS = {"sigmoid": nn.Sigmoid, "tanh": nn.Tanh, "relu": nn.ReLU}
 INPUTS = {
     "depth": lambda s: s.depth,
-    "base_speed": lambda s: s.base_speed.log10(),
+    "base_speed": lambda s: s.nominal_speed.log10(),  # the curve's approach speed (a hold's base is at 0)
     "velocity": lambda s: s.velocity,
     "time": lambda s: s.time,
 }

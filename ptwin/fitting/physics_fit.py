@@ -81,14 +81,17 @@ def rmse(model: ForceModel, samples: Samples, index: torch.Tensor) -> float:
         return (model(samples)[index] - samples.force[index]).square().mean().sqrt().item()
 
 
-def fit_physics(model: ForceModel, samples: Samples, index: torch.Tensor, iterations: int = 60) -> PhysicsFit:
-    """Fit the free parameters of ``model`` (K and its terms; frozen ones stay) to ``samples[index]`` by LM.
+def fit_physics(
+    model: ForceModel, samples: Samples, index: torch.Tensor, iterations: int = 60, tolerance: float = 1e-10
+) -> PhysicsFit:
+    """Fit the free parameters of ``model`` (K and its terms; frozen ones stay) to ``samples[index]`` by LM,
+    until a step lowers the cost by less than ``tolerance`` (relative).
 
     Raises ``FitError`` (the reason in words) when the model cannot be evaluated or linearised.
     """
     vector, residual = scaled_residual(model, samples, index)
     solver = LevenbergMarquardt(residual, vector.get())
-    theta = solver.run(iterations)
+    theta = solver.run(iterations, tolerance)
     vector.set(theta)
     jacobian, r = solver.checked_linearise(theta)
     cov = covariance(jacobian, r) * samples.noise_inflation

@@ -60,12 +60,12 @@ def apparent_permeability(
 
     plateau = {}
     for i, curve in enumerate(samples.curve_ids):
-        mine = (samples.curve == i) & samples.in_contact
-        deep = mine & (samples.depth >= plateau_from * samples.depth[mine].max())
+        mine = (samples.curve == i) & samples.in_contact & (samples.segment == 0)  # the approach
+        deep = mine & (samples.depth >= plateau_from * samples.depth[mine].max()) if mine.any() else mine
         values = permeability[deep]
         values = values[~values.isnan()]
         plateau[curve] = {
-            "base_speed": samples.base_speed[mine][0].item(),
+            "base_speed": samples.nominal_speed[mine][0].item() if mine.any() else math.nan,
             "mean": values.mean().item() if values.numel() else math.nan,
             "std_error": (values.std() / math.sqrt(values.numel())).item() if values.numel() > 1 else math.nan,
             "samples": int(values.numel()),

@@ -26,11 +26,14 @@ class ContactNuisance(nn.Module):
         self.offsets = nn.Parameter(torch.zeros(len(curve_ids), dtype=torch.float64))
 
     def shift(self, samples: Samples) -> torch.Tensor:
-        """What to subtract from each sample's depth [m]: its curve's correction; zero on samples of
-        other curves than the fitted ones (the reference's depth nodes)."""
-        if samples.curve_ids == self.curve_ids:
-            return self.offsets[samples.curve]
-        return torch.zeros_like(samples.depth)
+        """What to subtract from each sample's depth [m]: its curve's correction. Samples of curves after
+        the fitted ones (a simulated next experiment, its contact known) get none, and so do samples
+        whose curves are not the fitted ones at all (the reference's depth nodes)."""
+        count = len(self.curve_ids)
+        if samples.curve_ids[:count] != self.curve_ids:
+            return torch.zeros_like(samples.depth)
+        extra = torch.zeros(len(samples.curve_ids) - count, dtype=self.offsets.dtype, device=self.offsets.device)
+        return torch.cat([self.offsets, extra])[samples.curve]
 
     def values(self) -> dict[str, float]:
         """The corrections [m] by curve id."""

@@ -39,7 +39,7 @@ class ReferenceCurve(nn.Module):
 
     def __init__(self, reference: CurveKinematics, nodes: int = 200, smoothing: float = 0.05):
         super().__init__()
-        use = reference.in_contact
+        use = reference.in_contact & (reference.segment == 0)  # the approach: F(w) there is a function
         order = np.argsort(reference.depth[use])
         depth, force = reference.depth[use][order], reference.force[use][order]
         grid = np.linspace(0.0, depth[-1], nodes)

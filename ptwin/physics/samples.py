@@ -22,7 +22,7 @@ class Samples:
     time: torch.Tensor  # [s] since the start of the curve
     depth: torch.Tensor  # recorded indentation depth w [m]
     velocity: torch.Tensor  # U = dw/dt [m/s]
-    base_speed: torch.Tensor  # [m/s]
+    base_speed: torch.Tensor  # of the cantilever base, z-dot [m/s] (0 in a hold)
     force: torch.Tensor  # measured force [N] (0 where none was measured)
     start: torch.Tensor  # bool: first sample of a curve
     curve: torch.Tensor  # long: index into ``curve_ids``
@@ -30,6 +30,14 @@ class Samples:
     noise_floor: torch.Tensor  # [N], the curve's noise std σ
     curve_ids: tuple[str, ...]
     noise_inflation: float = 1.0  # κ² of the set's noise: block-mean variance over the white expectation
+    segment: torch.Tensor | None = None  # long: 0 approach, 1 hold, 2 retract (None: all approach)
+    nominal_speed: torch.Tensor | None = None  # the curve's approach speed [m/s] (None: base_speed)
+
+    def __post_init__(self):
+        if self.segment is None:
+            self.segment = torch.zeros_like(self.curve)
+        if self.nominal_speed is None:
+            self.nominal_speed = self.base_speed
 
     @classmethod
     def from_curves(cls, curves: list[CurveKinematics], noise_inflation: float = 1.0) -> Samples:
@@ -41,7 +49,7 @@ class Samples:
             time=cat([c.time for c in curves]),
             depth=cat([c.depth for c in curves]),
             velocity=cat([c.velocity for c in curves]),
-            base_speed=cat([np.full(len(c.time), c.base_speed) for c in curves]),
+            base_speed=cat([c.base_speeds for c in curves]),
             force=cat([c.force for c in curves]),
             start=cat(starts),
             curve=cat([np.full(len(c.time), i) for i, c in enumerate(curves)]),
@@ -49,7 +57,20 @@ class Samples:
             noise_floor=cat([np.full(len(c.time), c.noise_floor) for c in curves]),
             curve_ids=tuple(c.curve for c in curves),
             noise_inflation=noise_inflation,
+            segment=cat([c.segment for c in curves]),
+            nominal_speed=cat([np.full(len(c.time), c.base_speed) for c in curves]),
         )
+
+    def join(self, other: Samples) -> Samples:
+        """These samples followed by ``other``'s (its curves after these; the noise inflation is these')."""
+        values = {}
+        for f in fields(self):
+            mine, theirs = getattr(self, f.name), getattr(other, f.name)
+            if f.name == "curve":
+                theirs = theirs + len(self.curve_ids)
+            values[f.name] = torch.cat([mine, theirs]) if torch.is_tensor(mine) else mine
+        values["curve_ids"] = self.curve_ids + other.curve_ids
+        return Samples(**values)
 
     def __len__(self) -> int:
         return self.time.numel()

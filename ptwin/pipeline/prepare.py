@@ -125,6 +125,12 @@ def _fitted_curves(recordings: RecordingSet, curves, reference) -> tuple[list[Cu
         )
     deepest = reference.depth[reference.in_contact].max(initial=0.0)
     fitted, notes = [], []
+    settling = [f"{c.curve} {c.settling}" for c in curves if c.settling]
+    if settling:
+        notes.append(
+            f"The first samples of each hold are left out of the fits ({', '.join(settling)}): the tip stops "
+            f"faster than the velocity can be resolved there."
+        )
     for curve in curves:
         if curve is reference:
             continue

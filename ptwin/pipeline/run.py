@@ -7,8 +7,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
 import torch
 
+from ptwin.diagnosis.design import ExperimentDesign
 from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, diagnose
 from ptwin.physics.terms import VOCABULARY
 from ptwin.pipeline.identify import Identification, identify, per_curve_fits
@@ -63,6 +65,7 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
         progress,
         base_fit=identification.base,
         notes=notes,
+        design=_design(prepared, settings) if settings.diagnosis.design else None,
     )
     corrected_per_curve = _corrected_per_curve(prepared, diagnosis, iterations)
     figures = save_figures(
@@ -97,6 +100,24 @@ def _candidates(prepared: Prepared, settings: Settings) -> tuple[DiagnosisSettin
         terms = [t for t in terms if t not in skipped]
         notes += [f"{t}: {VOCABULARY[t].CONTACT_CAVEAT}." for t in terms if VOCABULARY[t].CONTACT_CAVEAT]
     return replace(settings.diagnosis, terms=terms), notes
+
+
+def _design(prepared: Prepared, settings: Settings) -> ExperimentDesign:
+    """What the next experiment is proposed for: this set's speeds, depth, sampling, noise and data."""
+    curves = prepared.curves
+    reference = next(c for c in curves if c.curve == prepared.recordings.meta.reference_curve)
+    return ExperimentDesign(
+        meta=prepared.recordings.meta,
+        speeds=tuple(sorted({c.base_speed for c in curves})),
+        depth=float(reference.depth[reference.in_contact].max()),
+        noise=prepared.noise,
+        step=float(np.median([np.median(np.diff(c.time)) for c in curves])),
+        free_travel=float(max(np.median([-c.z[0] for c in curves]), 0.1e-6)),
+        make_model=prepared.make_model,
+        samples=prepared.samples,
+        index=prepared.split.train,
+        smoothing=settings.data.smoothing,
+    )
 
 
 def _corrected_per_curve(prepared: Prepared, diagnosis: Diagnosis, iterations: int):

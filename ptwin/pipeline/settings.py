@@ -16,7 +16,7 @@ from ptwin.pgd.config import PGDConfig
 @dataclass
 class DataSettings:
     path: str = "data/demo"  # the recording-set folder
-    smoothing: float = 0.05  # velocity window, fraction of a curve's samples
+    smoothing: float = 0.05  # velocity window, fraction of the approach's samples
 
 
 @dataclass

@@ -84,8 +84,13 @@ def save_figures(
             residual=True,
         ),
     }
+    if bool((samples.segment == 1).any()):
+        series = {"base": base_force, **({"corrected": corrected} if corrected is not None else {})}
+        builders["holds_force_time"] = lambda: _holds(samples, series)
     if diagnosis is not None:
         builders.update(_diagnosis_figures(samples, index, base_force, correction, corrected, diagnosis.chosen))
+        for number, prediction in enumerate(diagnosis.predictions, start=1):
+            builders[f"next_experiment_{number}"] = lambda prediction=prediction: _proposal(prediction)
     figures = {}
     for name, build in builders.items():
         try:
@@ -98,6 +103,42 @@ def save_figures(
         plt.close(figure)
         figures[name] = figure
     return figures
+
+
+def _holds(samples, series: dict):
+    """Force against time of every curve with a hold: measured, and each model (the hold shaded)."""
+    curves = [i for i in range(len(samples.curve_ids)) if bool(((samples.curve == i) & (samples.segment == 1)).any())]
+    figure, axes = plt.subplots(1, len(curves), figsize=(4.5 * len(curves), 3.8), squeeze=False)
+    for ax, i in zip(axes[0], curves):
+        mine = torch.nonzero((samples.curve == i) & (samples.depth > 0)).squeeze(1)
+        time = samples.time[mine].numpy()
+        ax.plot(time, samples.force[mine].numpy() * NANO, ".", ms=1.5, color="grey", alpha=0.5, label="measured")
+        for (label, values), style in zip(series.items(), ("-", "--")):
+            ax.plot(time, values[mine].numpy() * NANO, style, lw=1, label=label)
+        hold = time[(samples.segment[mine] == 1).numpy()]
+        ax.axvspan(hold.min(), hold.max(), color="tab:blue", alpha=0.08, label="hold")
+        ax.set_xlabel("time [s]")
+        ax.set_title(samples.curve_ids[i])
+    axes[0][0].set_ylabel("force [nN]")
+    axes[0][0].legend(fontsize=7)
+    figure.suptitle("Ramp-and-hold curves against time")
+    figure.tight_layout()
+    return figure
+
+
+def _proposal(prediction):
+    """What each confounded candidate would record under the proposed experiment."""
+    figure, ax = plt.subplots(figsize=(7, 4.2))
+    for name, force in zip(prediction.names, prediction.forces):
+        ax.plot(prediction.time, force * NANO, lw=1.2, label=name)
+    if prediction.protocol.hold:
+        ax.axvspan(prediction.time[-1] - prediction.protocol.hold, prediction.time[-1], color="tab:blue", alpha=0.08)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("predicted force [nN]")
+    ax.set_title(f"Next experiment: {prediction.protocol.words()}\nseparation {prediction.separation:.1f}× the noise")
+    ax.legend(fontsize=8)
+    figure.tight_layout()
+    return figure
 
 
 def _apparent_against_depth(samples, index, apparent):

@@ -11,13 +11,43 @@ file *outside* the recording folder. Example, the bundled demo:
 from __future__ import annotations
 
 import argparse
+import json
 from dataclasses import asdict
 from pathlib import Path
 
 import yaml
 
 from ptwin.data.recordings import write_recordings
-from ptwin.synth.simulator import EFFECTS, Experiment, simulate
+from ptwin.synth.simulator import EFFECTS, Experiment, Hold, simulate
+
+
+def parse_holds(items: list[str]) -> tuple[Hold, ...]:
+    """``DEPTH:SECONDS`` (a ramp-and-hold at every speed) or ``DEPTH:SECONDS:SPEED`` (at one), SI units."""
+    holds = []
+    for item in items:
+        try:
+            values = [float(part) for part in item.split(":")]
+        except ValueError:
+            raise SystemExit(f"--hold {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED in SI units") from None
+        if len(values) not in (2, 3) or values[0] <= 0 or values[1] < 0 or (len(values) == 3 and values[2] <= 0):
+            raise SystemExit(f"--hold {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED, depth and speed > 0")
+        holds.append(Hold(*values))
+    return tuple(holds)
+
+
+def proposed_holds(diagnosis: Path | None) -> tuple[Hold, ...]:
+    """The curves the confounded groups of ``diagnosis`` (a diagnosis.json) propose, each once."""
+    if diagnosis is None:
+        return ()
+    try:
+        groups = json.loads(diagnosis.read_text())["confounded"]
+    except (OSError, ValueError, KeyError) as error:
+        raise SystemExit(f"--next-experiment {diagnosis}: not a readable diagnosis.json ({error})") from None
+    proposals = [group["next_experiment"] for group in groups if group.get("next_experiment")]
+    if not proposals:
+        raise SystemExit(f"--next-experiment {diagnosis}: it proposes no next experiment")
+    distinct = {json.dumps([p["protocol"], p["repeats"]]): p for p in proposals}.values()  # groups may agree
+    return tuple(hold for proposal in distinct for hold in Hold.proposed(proposal))
 
 
 def parse_effects(items: list[str]) -> dict[str, dict[str, float]]:
@@ -40,6 +70,17 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", required=True, type=Path, help="recording-set folder to write")
     parser.add_argument("--truth", required=True, type=Path, help="truth YAML (keep it outside --out)")
     parser.add_argument("--effect", action="append", default=[], help="TERM:PARAM=VALUE, repeatable")
+    parser.add_argument(
+        "--hold",
+        action="append",
+        default=[],
+        help="DEPTH:SECONDS[:SPEED]: also record ramp-and-holds (approach to depth w, base fixed), repeatable",
+    )
+    parser.add_argument(
+        "--next-experiment",
+        type=Path,
+        help="a diagnosis.json: also record the next experiment each of its confounded groups proposes",
+    )
     parser.add_argument("--permeability", type=float, default=defaults.permeability, help="K [m²]")
     parser.add_argument("--effective-modulus", type=float, default=defaults.effective_modulus, help="E* [Pa]")
     parser.add_argument("--probe-radius", type=float, default=defaults.probe_radius, help="ρ [m]")
@@ -86,6 +127,7 @@ def main(argv: list[str] | None = None) -> None:
             contact_error=args.contact_error,
             baseline_offset=args.baseline_offset,
             tilt=args.tilt,
+            holds=parse_holds(args.hold) + proposed_holds(args.next_experiment),
             seed=args.seed,
             effects=parse_effects(args.effect),
         )
@@ -95,6 +137,7 @@ def main(argv: list[str] | None = None) -> None:
     write_recordings(args.out, meta, curves)
     truth = {"format": "ptwin-truth/1", "recordings": str(args.out), **asdict(experiment)}
     truth["base_speeds"] = list(experiment.base_speeds)
+    truth["holds"] = [asdict(hold) for hold in experiment.holds]
     args.truth.parent.mkdir(parents=True, exist_ok=True)
     args.truth.write_text(yaml.safe_dump(truth, sort_keys=False))
     print(

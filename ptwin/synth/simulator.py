@@ -49,6 +49,25 @@ OUTSIDE_VOCABULARY = {"force_drift": ("rate",)}
 EFFECTS = {**{name: tuple(VOCABULARY[name].PARAMS) for name in SIMULATED}, **OUTSIDE_VOCABULARY}
 
 
+@dataclass(frozen=True)
+class Hold:
+    """A ramp-and-hold: approach until the indentation depth reaches ``depth`` [m], then the base stays
+    fixed for ``seconds`` [s] (the tip keeps creeping while the force relaxes through the cantilever;
+    0: an approach to that depth). ``speed``: the approach's [m/s]; None: at every base speed."""
+
+    depth: float
+    seconds: float
+    speed: float | None = None
+
+    @classmethod
+    def proposed(cls, next_experiment: dict) -> tuple[Hold, ...]:
+        """The curves a ``diagnosis.json`` ``next_experiment`` asks for (its protocol, ``repeats`` times)."""
+        protocol = next_experiment["protocol"]
+        approach = next(segment for segment in protocol if segment["segment"] == "approach")
+        seconds = sum(segment["duration"] for segment in protocol if segment["segment"] == "hold")
+        return (cls(approach["to_depth"], seconds, approach["base_speed"]),) * int(next_experiment["repeats"])
+
+
 @dataclass
 class Experiment:
     """Probe, cantilever, sample and protocol of a synthetic recording set (SI units)."""
@@ -77,6 +96,7 @@ class Experiment:
     baseline_offset: float = 0.0  # std of a force offset per curve [N]
     tilt: float = 0.0  # baseline slope dF/dz [N/m] (virtual deflection), every curve
     sample_rate: float | None = None  # [Hz]: a curve has duration × rate samples (else ``samples``)
+    holds: tuple[Hold, ...] = ()  # each: every base speed recorded again as a ramp-and-hold (ids v5h, v5h2, ...)
 
     def __post_init__(self):
         for term, params in self.effects.items():
@@ -112,6 +132,8 @@ class CurveSimulation:
     force: np.ndarray
     depth: np.ndarray
     balance_residual: np.ndarray
+    segment: np.ndarray  # 0 approach, 1 hold
+    base_speed: np.ndarray  # [m/s] per sample (0 in a hold)
 
 
 def fluid_coefficient_law(experiment: Experiment):
@@ -129,22 +151,78 @@ def fluid_coefficient_law(experiment: Experiment):
     return pgd
 
 
-def simulate_curve(experiment: Experiment, speed: float, effective_modulus: float | None = None) -> CurveSimulation:
-    """The noise-free curve at base speed ``speed`` (on a spot of ``effective_modulus``, default the experiment's)."""
+def simulate_curve(
+    experiment: Experiment,
+    speed: float,
+    effective_modulus: float | None = None,
+    hold: Hold | None = None,
+    balance: bool = True,
+) -> CurveSimulation:
+    """The noise-free curve at base speed ``speed`` (on a spot of ``effective_modulus``, default the
+    experiment's): an approach to ``z_end``, or, with ``hold``, an approach until the indentation depth
+    reaches ``hold.depth`` and then the base fixed for ``hold.seconds``. ``balance=False`` skips the
+    force balance's residual (zeros; it costs a model evaluation per sample)."""
     e = replace(experiment, effective_modulus=effective_modulus or experiment.effective_modulus)
+    drag = e.param("cantilever_drag", "b") * speed
+    rates = _balance(e, speed, drag)
+    contact_time = (drag / e.spring_constant - e.z_start) / speed  # tip reaches the surface: z − drag/k = 0
+    # Time since contact keeps the first, tiny steps representable. Right after contact every force is
+    # negligible and the tip moves with the base: start on w = v·τ0.
+    if hold is None:
+        time = e.time(speed)
+        first = 1e-9 * (time[-1] - contact_time)
+        after = time > contact_time + first
+        states = _integrate(
+            rates, (first, time[-1] - contact_time), [speed * first, 0.0, 0.0], e, time[after] - contact_time
+        )
+        return _record(e, speed, drag, time, after, states, np.zeros(time.size, dtype=np.int64), rates, balance)
+    step = float(np.diff(e.time(speed)[:2])[0])
+    first = 1e-9 * step
+    reached = lambda since_contact, state: state[0] - hold.depth  # noqa: E731 (solve_ivp reads its attributes)
+    reached.terminal, reached.direction = True, 1
+    ramp = solve_ivp(
+        rates,
+        (first, 10.0 * (e.z_end - e.z_start) / speed),
+        [speed * first, 0.0, 0.0],
+        method="Radau",
+        rtol=e.rtol,
+        atol=[1e-15, 1e-17, 1e-17],
+        events=reached,
+        dense_output=True,
+    )
+    if not ramp.success or not ramp.t_events[0].size:
+        raise RuntimeError(f"simulation of the {curve_id(speed)} ramp to {hold.depth:.3g} m failed: {ramp.message}")
+    stop = ramp.t_events[0][0]
+    held = _balance(e, 0.0, drag, stop * speed)
+    fixed = solve_ivp(
+        held,
+        (stop, stop + max(hold.seconds, 1e-12 * stop)),
+        ramp.y_events[0][0],
+        method="Radau",
+        rtol=e.rtol,
+        atol=[1e-15, 1e-17, 1e-17],
+        dense_output=True,
+    )
+    time = np.arange(0.0, contact_time + stop + hold.seconds, step)
+    since = time - contact_time
+    after = since > first
+    in_ramp = since[after] <= stop
+    states = np.where(in_ramp, ramp.sol(np.minimum(since[after], stop)), fixed.sol(np.maximum(since[after], stop)))
+    segment = np.where(since > stop, 1, 0)
+    return _record(e, speed, drag, time, after, states, segment, rates, balance, held, stop)
+
+
+def _balance(e: Experiment, speed: float, drag: float, stopped: float | None = None):
+    """The state equations (w, q, F_p)' of the force balance k(z − w) = F_el + g·q + F_fluid + π·γ·R·ẇ
+    (+ b·v), in time since contact, the base moving at ``speed`` (or fixed at ``stopped`` past the contact,
+    where the drag b·v has ended); ``balance=True``: the balance's residual instead [N]."""
     rho, k, mu, H0 = e.probe_radius, e.spring_constant, e.fluid_viscosity, e.sample_thickness
     gamma = e.param("solid_viscosity", "gamma")
     g, tau = e.param("solid_relaxation", "g"), e.param("solid_relaxation", "tau", 1.0)
     modulus_m = e.param("pore_pressure_relaxation", "M", np.inf)
     m = e.param("strain_dependent_permeability", "m")
-    drag = e.param("cantilever_drag", "b") * speed
-    delta = e.param("contact_offset", "delta")
     lagging = "pore_pressure_relaxation" in e.effects
     coefficient = fluid_coefficient_law(e)
-
-    time = e.time(speed)
-    z_true = e.z_start + speed * time
-    contact_time = (drag / k - e.z_start) / speed  # tip reaches the surface: z − drag/k = 0
 
     def rates(since_contact, state, balance=False):
         w, q, pore = state
@@ -153,7 +231,8 @@ def simulate_curve(experiment: Experiment, speed: float, effective_modulus: floa
         fluid_coefficient = coefficient(radius, H0 - w, permeability)
         stiffness = hertz_stiffness(np.array([w]), e.effective_modulus, rho)[0]
         # k(z − w) − drag with z − drag/k = v·τ exactly: no cancellation at first contact.
-        unbalanced = k * (speed * since_contact - w) - hertz_force(np.array([w]), e.effective_modulus, rho)[0] - g * q
+        base = speed * since_contact if stopped is None else stopped + drag / k
+        unbalanced = k * (base - w) - hertz_force(np.array([w]), e.effective_modulus, rho)[0] - g * q
         if not lagging:
             w_rate = unbalanced / (fluid_coefficient + np.pi * gamma * radius)
             pore_rate, pore = 0.0, fluid_coefficient * w_rate
@@ -170,27 +249,31 @@ def simulate_curve(experiment: Experiment, speed: float, effective_modulus: floa
             return unbalanced - pore - np.pi * gamma * radius * w_rate
         return [w_rate, stiffness * w_rate - q / tau, pore_rate]
 
-    # Time since contact keeps the first, tiny steps representable. Right after contact
-    # every force is negligible and the tip moves with the base: start on w = v·τ0.
-    first = 1e-9 * (time[-1] - contact_time)
-    after = time > contact_time + first
-    solution = solve_ivp(
-        rates,
-        (first, time[-1] - contact_time),
-        [speed * first, 0.0, 0.0],
-        method="Radau",
-        t_eval=time[after] - contact_time,
-        rtol=e.rtol,
-        atol=[1e-15, 1e-17, 1e-17],
-    )
+    return rates
+
+
+def _integrate(rates, span, start, e: Experiment, times) -> np.ndarray:
+    solution = solve_ivp(rates, span, start, method="Radau", t_eval=times, rtol=e.rtol, atol=[1e-15, 1e-17, 1e-17])
     if not solution.success:
-        raise RuntimeError(f"simulation of the {curve_id(speed)} curve failed: {solution.message}")
-    depth = np.minimum(z_true - drag / k, 0.0)
-    depth[after] = solution.y[0]
+        raise RuntimeError(f"simulation failed: {solution.message}")
+    return solution.y
+
+
+def _record(e, speed, drag, time, after, states, segment, rates, balance, held=None, stop=np.inf) -> CurveSimulation:
+    """The recorded curve: base z, force k(z − w) (+ drift), depth, the balance residual, segments."""
+    k = e.spring_constant
+    contact_time = (drag / k - e.z_start) / speed
+    since = time - contact_time
+    z_true = e.z_start + speed * np.minimum(time, contact_time + stop)
+    depth = np.minimum(z_true - np.where(since > stop, 0.0, drag) / k, 0.0)
+    depth[after] = states[0]
     residual = np.zeros_like(time)
-    residual[after] = [rates(t, y, balance=True) for t, y in zip(solution.t, solution.y.T)]
+    residual[after] = [(rates if t <= stop else held)(t, y, balance=True) for t, y in zip(since[after], states.T)]
     drift = e.param("force_drift", "rate") * time
-    return CurveSimulation(time, z_true + delta, k * (z_true - depth) + drift, depth, residual)
+    delta = e.param("contact_offset", "delta")
+    force = k * (z_true - depth) + drift
+    speeds = np.where(segment == 1, 0.0, speed)
+    return CurveSimulation(time, z_true + delta, force, depth, residual, segment, speeds)
 
 
 def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
@@ -198,26 +281,25 @@ def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
     e = experiment
     rng = np.random.default_rng(e.seed)  # the noise; the artefacts draw from their own stream
     artefacts = np.random.default_rng([e.seed, 1])
+    protocols = [(speed, replicate, None, 0) for speed in e.base_speeds for replicate in range(e.replicates)]
+    protocols += [
+        (speed, 0, hold, number)
+        for number, hold in enumerate(e.holds, start=1)
+        for speed in ((hold.speed,) if hold.speed else e.base_speeds)
+    ]
     frames = []
-    for speed in e.base_speeds:
-        for replicate in range(e.replicates):
-            modulus = e.effective_modulus * (1.0 + e.stiffness_spread * artefacts.standard_normal())
-            curve = simulate_curve(e, speed, modulus)
-            noise = correlated_noise(rng, curve.force.size, e.noise_std, e.noise_correlation)
-            travel = curve.z - curve.z[0] + e.z_start  # the true base travel from contact
-            offset = e.baseline_offset * artefacts.standard_normal() + e.tilt * travel
-            z = curve.z + (e.contact_error * artefacts.standard_normal() if e.contact_point == "estimate" else 0.0)
-            frames.append(
-                pd.DataFrame(
-                    {
-                        "curve": curve_id(speed, replicate),
-                        "base_speed": speed,
-                        "time": curve.time,
-                        "z": z,
-                        "force": curve.force + offset + noise,
-                    }
-                )
-            )
+    for speed, replicate, hold, number in protocols:
+        modulus = e.effective_modulus * (1.0 + e.stiffness_spread * artefacts.standard_normal())
+        curve = simulate_curve(e, speed, modulus, hold)
+        noise = correlated_noise(rng, curve.force.size, e.noise_std, e.noise_correlation)
+        travel = curve.z - curve.z[0] + e.z_start  # the true base travel from contact
+        offset = e.baseline_offset * artefacts.standard_normal() + e.tilt * travel
+        z = curve.z + (e.contact_error * artefacts.standard_normal() if e.contact_point == "estimate" else 0.0)
+        columns = {"curve": curve_id(speed, replicate), "base_speed": curve.base_speed, "time": curve.time}
+        if hold is not None:
+            columns["curve"] += "h" if number == 1 else f"h{number}"
+            columns["segment"] = np.where(curve.segment == 1, "hold", "approach")
+        frames.append(pd.DataFrame({**columns, "z": z, "force": curve.force + offset + noise}))
     meta = Meta(
         probe_radius=e.probe_radius,
         spring_constant=e.spring_constant,
@@ -227,7 +309,11 @@ def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
         sample="synthetic (ptwin.synth)",
         contact_point=e.contact_point,
     )
-    return meta, pd.concat(frames, ignore_index=True)
+    curves = pd.concat(frames, ignore_index=True)
+    if "segment" in curves:
+        curves["segment"] = curves["segment"].fillna("approach")
+        curves = curves[["curve", "base_speed", "time", "z", "force", "segment"]]
+    return meta, curves
 
 
 def correlated_noise(rng: np.random.Generator, size: int, std: float, lag1: float) -> np.ndarray:

@@ -1,0 +1,296 @@
+"""Close the loop: the recording that best separates candidates the data cannot tell apart.
+
+Each candidate is a fitted model (K, its terms' values, the Hertz modulus of its own
+elastic law). The forward simulator (``ptwin.synth``) predicts, noise-free and sampled as
+the set was, what each protocol of a menu of feasible next experiments would record
+under each candidate: another base speed (×3 or ÷3 of the recorded range, within what an
+AFM piezo does), holds of a few relaxation times near the deepest recorded depth and at
+half of it. Every protocol stays within ``WITHIN`` of the reference curve's depth (the
+elastic law is read off it, and the tip creeps on in a hold); a deeper indent would need
+a deeper reference curve as well, so it is not a one-curve proposal.
+
+A new curve separates two candidates A and B only if they cannot both refit it: what A
+predicts is appended to the data, both are refitted on everything (the recorded curves
+too), and the separation is √(Δχ²/κ²) with Δχ² the extra misfit left to B over A's own
+(which cancels what the simulator and the force model differ by) — in units of the
+noise model; the smaller of the two directions counts. A direction whose B contains A's
+terms is skipped: B then reproduces A's curve whatever it is (the base model is pore
+relaxation with M → ∞), and if A is true B's extra term fades to nothing, which the
+information criterion already settles. That takes fits, so every
+protocol is screened first by the candidates' difference at their current values (an
+optimistic bound: no refit) and the ``VERIFIED`` most promising are refitted. The
+proposal is the shortest verified protocol reaching ``TARGET`` with one curve, or else
+the one separating most per √time, repeated enough to reach it (at most
+``MAX_REPEATS`` curves).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+
+from ptwin.data.kinematics import curve_kinematics
+from ptwin.data.noise import NoiseModel
+from ptwin.data.recordings import Meta, RecordingSet
+from ptwin.fitting.lm import FitError
+from ptwin.fitting.physics_fit import PhysicsFit, fit_physics, scaled_residual
+from ptwin.physics.samples import Samples
+from ptwin.physics.terms import VOCABULARY
+from ptwin.synth.simulator import SIMULATED, CurveSimulation, Experiment, Hold, simulate_curve
+
+TARGET = 10.0  # separation [noise units] for a strong verdict
+MAX_REPEATS = 5
+VERIFIED = 3  # protocols refitted after the screen
+WITHIN = 0.9  # of the reference curve's depth: where protocols stop
+REFIT = 40  # LM iterations of a refit with the simulated curve ...
+REFIT_TOLERANCE = 1e-6  # ... until a step gains less than this (relative): χ² to far below one unit
+MAX_SAMPLES = 2000  # of a simulated curve in a refit (every k-th, its χ² scaled by k)
+SPEEDS = (1e-7, 1e-4)  # [m/s]: what an AFM piezo's approach covers
+MICRO = 1e6
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """One curve: an approach at ``base_speed`` [m/s] to the indentation depth ``to_depth`` [m], then the
+    base fixed for ``hold`` [s] (0: none)."""
+
+    base_speed: float
+    to_depth: float
+    hold: float = 0.0
+
+    def segments(self) -> list[dict]:
+        """The contract's ``next_experiment.protocol``."""
+        approach = {"segment": "approach", "base_speed": self.base_speed, "to_depth": self.to_depth}
+        return [approach] + ([{"segment": "hold", "duration": self.hold}] if self.hold else [])
+
+    def duration(self, free_travel: float) -> float:
+        """Seconds one curve takes, with ``free_travel`` [m] of approach before contact."""
+        return (free_travel + self.to_depth) / self.base_speed + self.hold
+
+    def words(self) -> str:
+        text = f"approach at {self.base_speed * MICRO:.3g} µm/s to {self.to_depth * MICRO:.3g} µm"
+        return text + (f", hold {self.hold:.3g} s" if self.hold else "")
+
+
+@dataclass
+class Prediction:
+    """What each candidate would record under a protocol (for the proposal's figure)."""
+
+    protocol: Protocol
+    names: list[str]
+    time: np.ndarray  # [s]
+    forces: list[np.ndarray]  # [N], one per candidate
+    separation: float
+
+
+@dataclass
+class ExperimentDesign:
+    """The set's instrument, sample and data, for predicting and refitting what candidates would record.
+
+    ``make_model(terms, values, permeability)`` builds a fresh force model of the set; ``samples`` and
+    ``index`` are what the candidates were fitted on.
+    """
+
+    meta: Meta
+    speeds: tuple[float, ...]  # recorded approach speeds [m/s]
+    depth: float  # deepest recorded indentation [m]
+    noise: NoiseModel
+    step: float  # sampling interval [s]
+    free_travel: float  # approach before contact [m]
+    make_model: Callable
+    samples: Samples
+    index: torch.Tensor
+    smoothing: float = 0.05
+    _simulated: dict = field(default_factory=dict, repr=False)  # (candidate, protocol) → CurveSimulation
+    _refitted: dict = field(default_factory=dict, repr=False)  # (truth, candidate, protocol) → χ²
+
+    def propose(self, names: list[str], fits: list[PhysicsFit]) -> tuple[dict, Prediction] | None:
+        """``next_experiment`` for the candidates ``fits`` (named ``names``) and its prediction, or None
+        when a candidate has a term the simulator cannot predict or no protocol separates them."""
+        if any(term not in SIMULATED for fit in fits for term in fit.terms):
+            return None
+        screened = sorted((self._predict(names, fits, p) for p in self._menu(fits)), key=self._merit, reverse=True)
+        directions = [(a, b) for a, b in ((fits[0], fits[1]), (fits[1], fits[0])) if not set(a.terms) <= set(b.terms)]
+        for prediction in screened[:VERIFIED]:
+            prediction.separation = min(self._refit_separation(prediction.protocol, a, b) for a, b in directions)
+        verified = screened[:VERIFIED]
+        reaching = [p for p in verified if p.separation >= TARGET]
+        best = min(reaching, key=self._duration) if reaching else max(verified, key=self._merit)
+        if best.separation < 1.0:
+            return None  # refitted, the candidates explain every protocol of the menu alike
+        return self._proposal(names, best), best
+
+    def _duration(self, prediction: Prediction) -> float:
+        return prediction.protocol.duration(self.free_travel)
+
+    def _merit(self, prediction: Prediction) -> float:
+        """Separation reachable per √second of recording (repeats add as √n)."""
+        return prediction.separation / math.sqrt(self._duration(prediction))
+
+    def _proposal(self, names: list[str], best: Prediction) -> dict:
+        repeats = 1
+        if 0 < best.separation < TARGET:
+            repeats = min(MAX_REPEATS, math.ceil((TARGET / best.separation) ** 2))
+        separation = best.separation * math.sqrt(repeats)
+        duration = self._duration(best)
+        curves = f" ({repeats} curves)" if repeats > 1 else ""
+        sentence = (
+            f"{best.protocol.words()}{curves}: refitted to it, {' and '.join(names)} would still differ by "
+            f"{separation:.1f}× the noise (the root of the Δχ² it adds under the noise model), {duration:.3g} s a curve"
+        )
+        return {
+            "protocol": best.protocol.segments(),
+            "repeats": repeats,
+            "separation": separation,
+            "duration": duration,
+            "sentence": sentence,
+        }
+
+    def _menu(self, fits: list[PhysicsFit]) -> list[Protocol]:
+        fastest, slowest = max(self.speeds), min(self.speeds)
+        depth = WITHIN * self.depth
+        holds = self._hold_times(fits)
+        menu = [Protocol(fastest, depth, seconds) for seconds in holds]
+        menu += [
+            Protocol(fastest, 0.5 * depth, max(holds)),
+            Protocol(min(3 * fastest, SPEEDS[1]), depth),
+            Protocol(max(slowest / 3, SPEEDS[0]), depth),
+        ]
+        return list(dict.fromkeys(menu))
+
+    def _hold_times(self, fits: list[PhysicsFit]) -> list[float]:
+        """1 s, and 5 relaxation times of each candidate (its network's tau, its pore τ_p at the deepest
+        depth), within 0.2–30 s."""
+        times = [1.0]
+        radius2 = 2 * self.meta.probe_radius * self.depth - self.depth**2
+        for fit in fits:
+            if "solid_relaxation" in fit.params:
+                times.append(5 * fit.params["solid_relaxation"]["tau"])
+            if "pore_pressure_relaxation" in fit.params:
+                modulus = fit.params["pore_pressure_relaxation"]["M"]
+                times.append(5 * self.meta.fluid_viscosity * radius2 / (fit.permeability * modulus))
+        return sorted({round(float(np.clip(t, 0.2, 30.0)), 3) for t in times})
+
+    def _experiment(self, fit: PhysicsFit) -> Experiment:
+        """The simulator's experiment of a fitted candidate."""
+        meta = self.meta
+        law = fit.model.reference
+        depth = law.depth_nodes.numpy()
+        shape = 4.0 / 3.0 * math.sqrt(meta.probe_radius) * depth**1.5
+        elastic = fit.model.elastic_nodes().detach().numpy()
+        modulus = float(shape @ elastic / (shape @ shape))  # the Hertz modulus of its own law
+        return Experiment(
+            probe_radius=meta.probe_radius,
+            spring_constant=meta.spring_constant,
+            sample_thickness=meta.sample_thickness,
+            fluid_viscosity=meta.fluid_viscosity,
+            permeability=fit.permeability,
+            effective_modulus=modulus,
+            z_start=-self.free_travel,
+            sample_rate=1.0 / self.step,
+            noise_std=0.0,
+            effects={term: dict(values) for term, values in fit.params.items()},
+            rtol=1e-7,
+        )
+
+    def _simulate(self, fit: PhysicsFit, protocol: Protocol) -> CurveSimulation:
+        key = (id(fit), protocol)
+        if key not in self._simulated:
+            e = replace(self._experiment(fit), base_speeds=(protocol.base_speed,), z_end=2 * protocol.to_depth + 1e-6)
+            hold = Hold(protocol.to_depth, protocol.hold)
+            self._simulated[key] = simulate_curve(e, protocol.base_speed, hold=hold, balance=False)
+        return self._simulated[key]
+
+    def _predict(self, names, fits: list[PhysicsFit], protocol: Protocol) -> Prediction:
+        """Every candidate's prediction under ``protocol``, and their smallest difference at their current
+        values (the screen)."""
+        curves = [self._simulate(fit, protocol) for fit in fits]
+        length = min(c.time.size for c in curves)
+        forces = [c.force[:length] for c in curves]
+        contact = np.any([c.depth[:length] > 0 for c in curves], axis=0)
+        scale = self.noise.std**2 * self.noise.inflation
+        separation = min(
+            math.sqrt(np.sum((a[contact] - b[contact]) ** 2) / scale)
+            for i, a in enumerate(forces)
+            for b in forces[i + 1 :]
+        )
+        return Prediction(protocol, list(names), curves[0].time[:length], forces, separation)
+
+    def _refit_separation(self, protocol: Protocol, truth: PhysicsFit, other: PhysicsFit) -> float:
+        """√(extra χ²/κ²) left to ``other`` over ``truth`` when both refit the data with what ``truth``
+        predicts for ``protocol`` appended."""
+        pseudo, stride = self._pseudo_samples(self._simulate(truth, protocol))
+        joined = self.samples.join(pseudo)
+        index = torch.cat([self.index, len(self.samples) + torch.nonzero(pseudo.in_contact).squeeze(1)])
+        chi_square = [self._refit(truth, joined, index, [truth.params]), self._refit(other, joined, index)]
+        if not math.isfinite(chi_square[0]):
+            return 0.0  # the truth itself cannot be refitted: no evidence either way
+        excess = (chi_square[1] - chi_square[0]) * stride / self.noise.inflation
+        return math.sqrt(max(excess, 0.0)) if math.isfinite(excess) else math.inf
+
+    def _refit(self, fit: PhysicsFit, samples: Samples, index: torch.Tensor, starts=None) -> float:
+        """χ² of ``fit``'s model refitted on ``samples[index]`` from the best of ``starts`` (default: its
+        current values and every start its terms offer), judged by the cost there, as the diagnosis fits."""
+        if starts is None:
+            combos = itertools.product(*(VOCABULARY[t].STARTS for t in fit.terms))
+            starts = [fit.params] + [
+                {t: {**fit.params[t], **start} for t, start in zip(fit.terms, combo)} for combo in combos
+            ]
+        best, best_cost = None, math.inf
+        for values in starts:
+            model = self.make_model(fit.terms, values, fit.permeability)
+            vector, residual = scaled_residual(model, samples, index)
+            try:
+                with torch.no_grad():
+                    cost = residual(vector.get()).square().sum().item()
+            except (ValueError, RuntimeError):
+                continue
+            if cost < best_cost:
+                best, best_cost = model, cost
+        if best is None:
+            return math.inf
+        try:
+            return fit_physics(best, samples, index, REFIT, REFIT_TOLERANCE).chi_square
+        except FitError:
+            return math.inf
+
+    def _pseudo_samples(self, curve: CurveSimulation) -> tuple[Samples, int]:
+        """The simulated curve as samples of a curve 'next' (every k-th sample, at most ``MAX_SAMPLES``),
+        with the set's noise std (a noise-free curve measures none), and k."""
+        frame = pd.DataFrame(
+            {
+                "curve": "next",
+                "base_speed": curve.base_speed,
+                "time": curve.time,
+                "z": curve.z,
+                "force": curve.force,
+                "segment": np.where(curve.segment == 1, "hold", "approach"),
+            }
+        )
+        meta = replace(self.meta, contact_point="known", reference_curve="next", noise_std=None)
+        kinematics = curve_kinematics(RecordingSet(Path("next experiment"), meta, frame), self.smoothing)[0]
+        stride = max(1, curve.time.size // MAX_SAMPLES)
+        arrays = {f.name: getattr(kinematics, f.name)[::stride] for f in fields(kinematics) if f.name in STRIDED}
+        kinematics = replace(kinematics, **arrays, noise=self.noise)
+        return Samples.from_curves([kinematics], self.samples.noise_inflation), stride
+
+
+STRIDED = (
+    "time",
+    "z",
+    "force",
+    "depth",
+    "contact_radius",
+    "velocity",
+    "height",
+    "in_contact",
+    "segment",
+    "base_speeds",
+)

@@ -1,0 +1,122 @@
+"""Ramp-and-hold physics against closed forms, the simulator's balance, and the force model."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import ptwin
+from ptwin.data.kinematics import curve_kinematics, segmented_derivative
+from ptwin.data.recordings import load_recordings, write_recordings
+from ptwin.physics.elastic import ReferenceCurve
+from ptwin.physics.model import ForceModel, smooth_contact_radius
+from ptwin.physics.recurrence import relaxation_integral
+from ptwin.physics.samples import Samples
+from ptwin.synth.simulator import Experiment, Hold, simulate, simulate_curve
+
+pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+
+
+def test_relaxation_after_a_ramp_decays_as_the_closed_form():
+    # F_el rises linearly (slope a) for T, then holds: q = a·τ(1 − e^{−T/τ})·e^{−(t−T)/τ} after it; a short
+    # ramp is a step ΔF = a·T: q → ΔF·e^{−(t−T)/τ}.
+    tau = 0.3
+    for ramp in (0.2, 1e-4):
+        time = torch.cat([torch.linspace(0, ramp, 50), torch.linspace(ramp, 3.0, 400)[1:]]).to(torch.float64)
+        force = 2.0 * torch.clamp(time, max=ramp) / ramp  # ΔF = 2
+        start = torch.arange(time.numel()) == 0
+        q = relaxation_integral(force, torch.full_like(time, tau), time, start)
+        after = time >= ramp
+        expected = 2.0 / ramp * tau * (1 - math.exp(-ramp / tau)) * torch.exp(-(time[after] - ramp) / tau)
+        torch.testing.assert_close(q[after], expected, rtol=1e-8, atol=1e-12)
+    torch.testing.assert_close(q[after], 2.0 * torch.exp(-(time[after] - ramp) / tau), rtol=1e-3, atol=0)
+
+
+def stiff_hold(effects, depth, sample_rate=20000.0, seconds=0.4):
+    """A noise-free ramp-and-hold on a cantilever so stiff that the tip stays where the base stops."""
+    experiment = Experiment(spring_constant=1e3, sample_rate=sample_rate, effects=effects)
+    return simulate_curve(experiment, 8e-6, hold=Hold(depth, seconds)), experiment
+
+
+def relaxation_time(curve) -> float:
+    """τ of F(t) − F(∞) = A·e^{−t/τ} over the hold (log-linear fit where it is above 1e-3 of A; the hold
+    lasts ≥ 30 τ, so F(∞) is its last value to e^{−30})."""
+    hold = curve.segment == 1
+    time, force = curve.time[hold], curve.force[hold]
+    excess = force - force[-1]
+    use = excess > 1e-3 * excess[0]
+    slope = np.polyfit(time[use] - time[0], np.log(excess[use]), 1)[0]
+    return -1.0 / slope
+
+
+def test_pore_pressure_relaxes_with_mu_r2_over_k_m_and_scales_with_r_squared_between_depths():
+    modulus = 3e4
+    times, radii = [], []
+    for depth in (1e-6, 3e-6):
+        curve, e = stiff_hold({"pore_pressure_relaxation": {"M": modulus}}, depth)
+        radius = math.sqrt(2 * e.probe_radius * depth - depth**2)
+        expected = e.fluid_viscosity * radius**2 / (e.permeability * modulus)
+        assert relaxation_time(curve) == pytest.approx(expected, rel=0.02)
+        times.append(relaxation_time(curve))
+        radii.append(radius)
+    assert times[1] / times[0] == pytest.approx((radii[1] / radii[0]) ** 2, rel=0.02)
+
+
+def test_the_networks_relaxation_time_does_not_change_with_depth():
+    effects = {"solid_relaxation": {"g": 0.2, "tau": 0.05}}
+    measured = [relaxation_time(stiff_hold(effects, depth, 2000.0, 1.6)[0]) for depth in (1e-6, 3e-6)]
+    assert measured == pytest.approx([0.05, 0.05], rel=0.02)
+
+
+def test_the_simulated_force_balance_holds_through_the_ramp_and_the_hold():
+    for effects in ({"solid_relaxation": {"g": 0.2, "tau": 0.5}}, {"pore_pressure_relaxation": {"M": 3e4}}):
+        curve = simulate_curve(Experiment(samples=400, effects=effects), 8e-6, hold=Hold(3e-6, 1.0))
+        assert (curve.segment == 1).sum() > 100
+        assert np.abs(curve.balance_residual).max() < 1e-6 * np.abs(curve.force).max()
+        hold = curve.segment == 1
+        assert curve.depth[hold][-1] > curve.depth[hold][0]  # the tip creeps while the force relaxes
+
+
+def test_velocity_is_not_smeared_across_the_ramp_hold_corner():
+    time = np.linspace(0, 2, 2001)
+    segment = (time > 1).astype(np.int64)
+    depth = np.where(segment == 0, 3e-6 * time, 3e-6)
+    velocity = segmented_derivative(time, depth, 101, segment)
+    np.testing.assert_allclose(velocity[segment == 0], 3e-6, rtol=1e-9)
+    np.testing.assert_allclose(velocity[segment == 1], 0.0, atol=1e-15)  # rounding only: 3 µm/s before
+
+
+@pytest.mark.parametrize(
+    ("term", "values"),
+    [
+        ("solid_viscosity", {"gamma": 5.0}),
+        ("solid_relaxation", {"g": 0.1, "tau": 0.5}),
+        ("strain_dependent_permeability", {"m": 2.0}),
+        ("cantilever_drag", {"b": 1.0e-4}),
+    ],
+)
+def test_the_force_model_reproduces_a_simulated_hold(term, values, tmp_path, coarse_cache):
+    experiment = Experiment(
+        base_speeds=(0.5e-6,), holds=(Hold(3e-6, 1.0),), samples=500, noise_std=0.0, effects={term: values}
+    )
+    write_recordings(tmp_path, *simulate(experiment))
+    reference, ramp_and_hold = curve_kinematics(load_recordings(tmp_path))
+    samples = Samples.from_curves([ramp_and_hold])
+    basis = next(coarse_cache.glob("*.pt"))
+
+    def model(terms, vals):
+        fluid = ptwin.FluidForce.load(basis, permeability=experiment.permeability, viscosity=1e-3)
+        return ForceModel(ReferenceCurve(reference), fluid, 12e-6, 6e-3, terms, vals)
+
+    hold = samples.in_contact & (samples.segment == 1)
+    with torch.no_grad():
+        error = (model((term,), {term: values})(samples) - samples.force)[hold].square().mean().sqrt()
+        effect = (model((), {})(samples) - samples.force)[hold].square().mean().sqrt()
+    assert effect > 3e-11  # the hold shows the term ...
+    assert error < 0.1 * effect  # ... and the model with its true parameters accounts for it
+
+
+def test_holds_through_the_contact_radius_stay_finite_at_zero_depth():
+    radius = smooth_contact_radius(torch.tensor([-1e-9, 0.0, 1e-9], dtype=torch.float64), 12e-6)
+    assert torch.isfinite(radius).all() and radius[0] == 0
