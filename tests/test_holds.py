@@ -9,7 +9,7 @@ import torch
 import ptwin
 from ptwin.data.kinematics import curve_kinematics, segmented_derivative
 from ptwin.data.recordings import load_recordings, write_recordings
-from ptwin.physics.elastic import ReferenceCurve
+from ptwin.physics.elastic import ReferenceCurve, hertz_force
 from ptwin.physics.model import ForceModel, smooth_contact_radius
 from ptwin.physics.recurrence import relaxation_integral
 from ptwin.physics.samples import Samples
@@ -120,3 +120,27 @@ def test_the_force_model_reproduces_a_simulated_hold(term, values, tmp_path, coa
 def test_holds_through_the_contact_radius_stay_finite_at_zero_depth():
     radius = smooth_contact_radius(torch.tensor([-1e-9, 0.0, 1e-9], dtype=torch.float64), 12e-6)
     assert torch.isfinite(radius).all() and radius[0] == 0
+
+
+def test_a_slow_ramp_reaches_its_hold_depth_when_the_quasi_static_balance_says():
+    """A slow approach on a stiff cantilever: the tip starts a billionth of the ramp into the sample. Started
+    a billionth of one sampling step in (far below the solver's tolerance), its error control missed the stiff
+    start and the hold began after 40 µs, at the wrong depth."""
+    # The values of an experiment-design candidate that once failed.
+    e = Experiment(
+        probe_radius=12e-6,
+        spring_constant=2.88,
+        effective_modulus=19998.68479659364,
+        permeability=1.989112236492037e-16,
+        samples=2000,
+        z_start=-2e-7,
+        z_end=7.777260552219547e-06,
+        sample_rate=1902.8571428570954,
+        base_speeds=(1.6666666666666665e-07,),
+    )
+    depth, speed = 3.3886302761097735e-06, 1.6666666666666665e-07
+    curve = simulate_curve(e, speed, hold=Hold(depth, 0.0), balance=False)
+    force = hertz_force(np.array([depth]), e.effective_modulus, e.probe_radius)[0]
+    quasi_static = (depth + force / e.spring_constant - e.z_start) / speed  # base at k(z − w) = Hertz(w)
+    assert curve.time[-1] == pytest.approx(quasi_static, rel=0.01)
+    assert curve.depth[-1] == pytest.approx(depth, rel=1e-3)

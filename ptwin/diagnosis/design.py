@@ -116,7 +116,9 @@ class ExperimentDesign:
         when a candidate has a term the simulator cannot predict or no protocol separates them."""
         if any(term not in SIMULATED for fit in fits for term in fit.terms):
             return None
-        screened = sorted((self._predict(names, fits, p) for p in self._menu(fits)), key=self._merit, reverse=True)
+        screened = sorted(self._screen(names, fits), key=self._merit, reverse=True)
+        if not screened:
+            return None
         directions = [(a, b) for a, b in ((fits[0], fits[1]), (fits[1], fits[0])) if not set(a.terms) <= set(b.terms)]
         for prediction in screened[:VERIFIED]:
             prediction.separation = min(self._refit_separation(prediction.protocol, a, b) for a, b in directions)
@@ -126,6 +128,17 @@ class ExperimentDesign:
         if best.separation < 1.0:
             return None  # refitted, the candidates explain every protocol of the menu alike
         return self._proposal(names, best), best
+
+    def _screen(self, names, fits: list[PhysicsFit]) -> list[Prediction]:
+        """The predictions for every protocol of the menu the simulator can follow for all candidates (a
+        candidate's values may make one stiff beyond its tolerances: that protocol is then not offered)."""
+        predictions = []
+        for protocol in self._menu(fits):
+            try:
+                predictions.append(self._predict(names, fits, protocol))
+            except (RuntimeError, ValueError):
+                continue
+        return predictions
 
     def _duration(self, prediction: Prediction) -> float:
         return prediction.protocol.duration(self.free_travel)

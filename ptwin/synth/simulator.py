@@ -177,7 +177,9 @@ def simulate_curve(
         )
         return _record(e, speed, drag, time, after, states, np.zeros(time.size, dtype=np.int64), rates, balance)
     step = float(np.diff(e.time(speed)[:2])[0])
-    first = 1e-9 * step
+    # As above, a billionth of the ramp; the depth w = v·τ0 must stay well above the solver's absolute
+    # tolerance or its error control cannot see the stiff start.
+    first = 1e-9 * (hold.depth - e.z_start) / speed
     reached = lambda since_contact, state: state[0] - hold.depth  # noqa: E731 (solve_ivp reads its attributes)
     reached.terminal, reached.direction = True, 1
     ramp = solve_ivp(
