@@ -17,6 +17,7 @@ TRUTHS = {
     "solid_viscosity": {"gamma": 5.0},
     "solid_relaxation": {"g": 0.1, "tau": 0.5},
     "pore_pressure_relaxation": {"M": 3.0e4},
+    "power_law_rheology": {"alpha": 0.05},
     "strain_dependent_permeability": {"m": 2.0},
     "cantilever_drag": {"b": 1.0e-4},
     "contact_offset": {"delta": 0.1e-6},

@@ -92,6 +92,7 @@ def test_velocity_is_not_smeared_across_the_ramp_hold_corner():
     [
         ("solid_viscosity", {"gamma": 5.0}),
         ("solid_relaxation", {"g": 0.1, "tau": 0.5}),
+        ("power_law_rheology", {"alpha": 0.05}),
         ("strain_dependent_permeability", {"m": 2.0}),
         ("cantilever_drag", {"b": 1.0e-4}),
     ],

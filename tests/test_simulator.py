@@ -66,6 +66,8 @@ def test_drag_and_offset_leave_their_evidence():
         {"pore_pressure_relaxation": {"M": 3e4}, "solid_relaxation": {"g": 0.3, "tau": 0.05}},
         {"pore_pressure_relaxation": {"M": 3e4}, "solid_viscosity": {"gamma": 20.0}},
         {"solid_viscosity": {"gamma": 20.0}, "strain_dependent_permeability": {"m": 3.0}},
+        {"power_law_rheology": {"alpha": 0.1}, "pore_pressure_relaxation": {"M": 3e4}},
+        {"power_law_rheology": {"alpha": 0.1}, "solid_relaxation": {"g": 0.3, "tau": 0.05}},
     ],
 )
 def test_force_balance_holds_along_the_curve_for_combined_terms(effects):

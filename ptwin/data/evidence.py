@@ -1,6 +1,7 @@
 """Evidence the curves give before any model: what replicates say about spot-to-spot
-variation, and what removed baselines say about drag. Sentences for the report, and
-the numbers behind them."""
+variation, what removed baselines say about drag, and the shape of the rate effect
+(the force at equal depth, faster curves over the slowest). Sentences for the report,
+and the numbers behind them."""
 
 from __future__ import annotations
 
@@ -86,3 +87,129 @@ def drag_from_baselines(curves: list[CurveKinematics]) -> str | None:
     return (
         f"The removed baseline offsets do not depend on speed (slope {slope:.2g} ± {std:.1g} N s/m): no sign of drag."
     )
+
+
+RATIO_FLOOR = 20.0  # a force ratio is read only where the slow curve's force exceeds this many noise std
+RATIO_BINS = 20
+FASTER = 1.2  # curves at least this much faster than the reference show a rate effect
+CLEARER = 4.0  # how much more one growth law must be contradicted than the other to be named
+
+
+@dataclass
+class RateProfile:
+    """F/F_ref at equal depth of one approach curve over the reference (slowest) curve, in depth bins."""
+
+    curve: str
+    speed_ratio: float  # v / v_ref
+    depth: np.ndarray  # bin centres [m]
+    ratio: np.ndarray
+
+    @property
+    def median(self) -> float:
+        return float(np.median(self.ratio))
+
+    @property
+    def median_std(self) -> float:
+        """Standard error of the median ratio from the bin-to-bin scatter: the median absolute second
+        difference (blind to a smooth change with depth, robust to the steep first bins), at least 1e-4."""
+        scatter = 1.4826 * float(np.median(np.abs(np.diff(self.ratio, 2)))) / np.sqrt(6.0)
+        return max(1.2533 * scatter / np.sqrt(self.ratio.size), 1e-4)
+
+    def ends(self) -> tuple[float, float]:
+        """Median ratio over the shallowest and the deepest third of the bins."""
+        third = max(self.ratio.size // 3, 1)
+        return float(np.median(self.ratio[:third])), float(np.median(self.ratio[-third:]))
+
+
+@dataclass
+class RateEffect:
+    reference: str
+    profiles: list[RateProfile]
+
+    def sentence(self) -> str:
+        """The ratios over depth and how the excess grows with speed, in words a user can check."""
+        ratios = "; ".join(
+            f"{p.curve}/{self.reference} ({p.speed_ratio:.3g}× the speed) {p.ends()[0]:.3f} → {p.ends()[1]:.3f} "
+            f"from {p.depth[0] * 1e6:.2f} to {p.depth[-1] * 1e6:.2f} µm"
+            for p in self.profiles
+        )
+        text = f"Rate effect before any model, F/F_{self.reference} at equal depth: {ratios}."
+        return text + " " + self._growth()
+
+    def _growth(self) -> str:
+        """How the excess grows with speed: a power law keeps ln r / ln(v/v_ref) (its alpha) the same at
+        every speed, a viscous or Darcy force keeps (r − 1)/(v/v_ref − 1) the same. Said only where one
+        of them changes with speed by over 3 standard errors and ``CLEARER`` times more than the other."""
+        speeds = {round(p.speed_ratio, 3): p for p in self.profiles}
+        if len(speeds) < 2:
+            return "One speed ratio cannot show how the excess grows with speed (a third speed would)."
+        profiles = list(speeds.values())
+        exponent = [
+            (np.log(p.median) / np.log(p.speed_ratio), p.median_std / p.median / np.log(p.speed_ratio))
+            for p in profiles
+        ]
+        linear = [((p.median - 1) / (p.speed_ratio - 1), p.median_std / (p.speed_ratio - 1)) for p in profiles]
+        spread = {name: _inconsistency(values) for name, values in (("power", exponent), ("linear", linear))}
+        listing = (
+            "ln r / ln(v/v_ref) (a power law's alpha, the same at every speed for one): "
+            + ", ".join(f"{value:.3f}" for value, _ in exponent)
+            + "; (r − 1)/(v/v_ref − 1) (the same at every speed for a viscous or Darcy force): "
+            + ", ".join(f"{value:.3f}" for value, _ in linear)
+        )
+        if spread["linear"] > max(3.0, CLEARER * spread["power"]):
+            verdict = (
+                "the excess grows more slowly than linearly with speed, as a power law's does (or a lagging "
+                "force's that saturates), not as a Darcy or viscous force's alone"
+            )
+        elif spread["power"] > max(3.0, CLEARER * spread["linear"]):
+            verdict = "the excess grows linearly with speed, as a Darcy or viscous force's does, not as a power law's"
+        else:
+            verdict = "the scatter of the ratios cannot tell a power law's growth from a linear one"
+        return f"Growth with speed: {listing}; {verdict}."
+
+
+def _inconsistency(values: list[tuple[float, float]]) -> float:
+    """The largest difference between two of the values in units of its standard error."""
+    return max(abs(a - b) / np.hypot(sa, sb) for i, (a, sa) in enumerate(values) for b, sb in values[i + 1 :])
+
+
+def rate_effect(curves: list[CurveKinematics], reference: CurveKinematics) -> RateEffect | None:
+    """F/F_ref at equal depth of every approach faster than the reference by ``FASTER``, on depth bins
+    common to all (where the slow force exceeds ``RATIO_FLOOR`` noise std, to the shallowest curve's
+    deepest sample, so every ratio is read at the same depths); None where no curve gives a ratio."""
+    faster = [c for c in curves if c is not reference and c.base_speed >= FASTER * reference.base_speed]
+    approaches = {c.curve: _approach(c) for c in [reference, *faster]}
+    if not faster or any(depth.size == 0 for depth, _ in approaches.values()):
+        return None
+    ref_depth, ref_force = approaches[reference.curve]
+    strong = ref_depth[ref_force > RATIO_FLOOR * reference.noise.std]
+    if strong.size == 0:
+        return None
+    edges = np.linspace(strong.min(), min(depth.max() for depth, _ in approaches.values()), RATIO_BINS + 1)
+    if edges[-1] <= edges[0]:
+        return None
+    slow = _binned(*approaches[reference.curve], edges)
+    profiles = []
+    for curve in faster:
+        fast = _binned(*approaches[curve.curve], edges)
+        known = np.isfinite(fast) & np.isfinite(slow) & (slow > 0) & (fast > 0)
+        if known.sum() >= 5:
+            centres = 0.5 * (edges[:-1] + edges[1:])
+            ratio = curve.base_speed / reference.base_speed
+            profiles.append(RateProfile(curve.curve, ratio, centres[known], fast[known] / slow[known]))
+    return RateEffect(reference.curve, profiles) if profiles else None
+
+
+def _approach(curve: CurveKinematics) -> tuple[np.ndarray, np.ndarray]:
+    use = curve.in_contact & (curve.segment == 0)
+    return curve.depth[use], curve.force[use]
+
+
+def _binned(depth: np.ndarray, force: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """The force at each bin's centre: a line fitted to the samples in the bin (nan with fewer than 3)."""
+    values = np.full(edges.size - 1, np.nan)
+    for i, (low, high) in enumerate(zip(edges[:-1], edges[1:])):
+        inside = (depth >= low) & (depth < high)
+        if inside.sum() >= 3:
+            values[i] = np.polyfit(depth[inside] - 0.5 * (low + high), force[inside], 1)[1]
+    return values

@@ -15,7 +15,7 @@ from ptwin.diagnosis.design import ExperimentDesign, Prediction
 from ptwin.diagnosis.intervals import profile_interval
 from ptwin.diagnosis.locate import Mismatch, locate
 from ptwin.diagnosis.name import Candidate, choose, confounded, fit_candidates, rejected
-from ptwin.diagnosis.words import finite_or_none, summarise
+from ptwin.diagnosis.words import MATERIAL, finite_or_none, summarise
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import rmse_of
 from ptwin.fitting.physics_fit import PhysicsFit, rmse
@@ -27,7 +27,6 @@ from ptwin.physics.terms import VOCABULARY
 
 FORMAT = "ptwin-diagnosis/2"
 CORRELATED = 0.95  # |correlation| with K worth a warning
-MATERIAL = 0.02  # a relative difference in K worth saying that K is not fixed
 
 
 @dataclass

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 MICRO = 1e6
+MATERIAL = 0.02  # a relative difference in K worth saying that K is not fixed
 
 
 def finite_or_none(value):
@@ -35,7 +36,7 @@ def summarise(d, apparent, threshold: float) -> str:
             f"The base model explains every curve to the noise (validation RMS {ratio:.2f}× the noise std, "
             f"residual whiteness {d.whiteness['base']:.1f} ≤ {threshold:g} in units of the noise's own correlation)."
         )
-        return sentence + _permeability_not_fixed(d.confounded)
+        return sentence + _permeability_not_fixed(d) + _to_tell_apart(d.confounded)
     sentence = _where(d, ratio, threshold) + _trend(apparent)
     if d.unexplained:
         return sentence + (
@@ -53,30 +54,32 @@ def summarise(d, apparent, threshold: float) -> str:
         )
     sentence += f"{names} would explain it (the validation RMS falls to {after}), but the evidence is weak"
     if d.confounded:
-        rivals = " or ".join(group["terms"][1] for group in d.confounded)
-        tell = "; ".join(_record(group) for group in d.confounded if group["tell_apart"])
-        sentence += f": the data cannot tell {names} from {rivals}"
-        return sentence + (f". To tell them apart, record {tell}." if tell else ".")
+        rivals = " or ".join(_called(group["terms"][1]) for group in d.confounded)
+        sentence += f": the data cannot tell {names} from {rivals}."
+        return sentence + _permeability_not_fixed(d) + _to_tell_apart(d.confounded)
     return sentence + "; see each term's evidence."
 
 
-def _permeability_not_fixed(groups: list[dict]) -> str:
-    """' K is not fixed by these data: …' for terms that explain the data as well as the base model with
-    another K; '' when there are none."""
-    if not groups:
+def _permeability_not_fixed(d) -> str:
+    """' K is not fixed by these data: …' when the candidates that explain the data equally well give K
+    values more than ``MATERIAL`` apart; '' otherwise."""
+    ks = {name: k for group in d.confounded for name, k in group["permeability"].items() if k is not None}
+    finite = [k for k in ks.values() if math.isfinite(k) and k > 0]
+    if len(finite) < 2 or max(finite) / min(finite) - 1 <= MATERIAL:
         return ""
-    ks = [
-        f"{name} explains them as well with K = {k:.3g} m²"
-        for group in groups
-        for name, k in group["permeability"].items()
-        if name != "base model"
-    ]
-    base = groups[0]["permeability"]["base model"]
-    tell = "; ".join(_record(group) for group in groups)
-    return (
-        f" K is not fixed by these data: {'; '.join(ks)} (the base model: {base:.3g} m²). "
-        f"To tell them apart, record {tell}."
-    )
+    listing = ", ".join(f"{number(k, '.3g')} m² with {_called(name)}" for name, k in ks.items())
+    low, high = d.permeability["corrected_interval"]
+    covers = "" if low is None or high is None else f"; its 95% interval [{low:.3g}, {high:.3g}] m² covers them"
+    return f" K is not fixed by these data: {listing}{covers}."
+
+
+def _called(name: str) -> str:
+    return "the base model" if name == "base model" else name
+
+
+def _to_tell_apart(groups: list[dict]) -> str:
+    tell = "; ".join(record for record in map(_record, groups) if record)
+    return f" To tell them apart, record {tell}." if tell else ""
 
 
 def _record(group: dict) -> str:

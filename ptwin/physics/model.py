@@ -11,11 +11,11 @@ from torch import nn
 from ptwin.physics.contact import ContactNuisance
 from ptwin.physics.elastic import ReferenceCurve
 from ptwin.physics.fluid_force import FluidForce, FluidInputError
+from ptwin.physics.recurrence import hereditary_inverse
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
 PERMEABILITY = "fluid.log_permeability"  # K's name among a ForceModel's parameters
-RELAXATION_PASSES = 6
 
 
 def smooth_contact_radius(depth: torch.Tensor, probe_radius: float) -> torch.Tensor:
@@ -116,13 +116,12 @@ class ForceModel(nn.Module):
             raise ValueError("a per-node permeability is defined for the base model only (no terms)")
         at = self.reference.node_samples(nodes)
         unrelaxed = at.force - sum(self.rate_forces(at, None, permeability).values())
-        hereditary = [term for term in self.terms.values() if term.ACTS_ON_ELASTIC]
-        elastic = unrelaxed
-        if hereditary:
-            # F_el + Σ relax(F_el) = unrelaxed: a contraction (rate ≤ g), so a few passes leave O(g⁶).
-            for _ in range(RELAXATION_PASSES):
-                elastic = unrelaxed - sum(term.elastic_force(at, elastic) for term in hereditary)
-        return elastic
+        hereditary = [term.elastic_modes(at) for term in self.terms.values() if term.ACTS_ON_ELASTIC]
+        if not hereditary:
+            return unrelaxed
+        # F_el + Σ hereditary(F_el) = unrelaxed on the reference's time history, solved exactly.
+        extra, weights, times = (torch.cat([torch.atleast_1d(m[i]) for m in hereditary]) for i in range(3))
+        return hereditary_inverse(unrelaxed, extra.sum(), weights, times, at.time)
 
     def elastic(self, depth: torch.Tensor, permeability: torch.Tensor | None = None) -> torch.Tensor:
         """F_el(depth) [N]; ``permeability``: None (the model's K) or one K [m²] per depth."""

@@ -10,24 +10,33 @@ import torch
 
 
 def linear_recurrence(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """x with x_i = a_i x_{i−1} + b_i and x_{−1} = 0 (set a_i = 0 to restart at i)."""
-    n = a.numel()
+    """x with x_i = a_i x_{i−1} + b_i and x_{−1} = 0 along the last dimension (set a_i = 0 to restart
+    at i); leading dimensions are independent recurrences (e.g. the modes of a kernel)."""
+    n = a.shape[-1]
     shift = 1
     while shift < n:
-        a_before = torch.cat([torch.ones_like(a[:shift]), a[:-shift]])
-        b_before = torch.cat([torch.zeros_like(b[:shift]), b[:-shift]])
+        a_before = torch.cat([torch.ones_like(a[..., :shift]), a[..., :-shift]], dim=-1)
+        b_before = torch.cat([torch.zeros_like(b[..., :shift]), b[..., :-shift]], dim=-1)
         a, b = a * a_before, a * b_before + b
         shift *= 2
     return b
 
 
 def _decay(time: torch.Tensor, start: torch.Tensor, relaxation_time: torch.Tensor):
-    """(a, τ(1 − a)/Δt) per sample for a = exp(−Δt/τ); a = 0 where τ = 0 or a curve starts."""
+    """(a, τ(1 − a)/Δt) per sample for a = exp(−Δt/τ); a = 0 where τ = 0 or a curve starts; the mean
+    τ(1 − a)/Δt → 1 over a step of zero length (repeated times)."""
     step = torch.diff(time, prepend=time[:1]).where(~start, torch.ones_like(time))
     positive = relaxation_time > 0
     safe_tau = relaxation_time.where(positive, torch.ones_like(relaxation_time))
     a = torch.exp(-step / safe_tau).where(positive & ~start, torch.zeros_like(time))
-    return a, (safe_tau * (1 - a) / step).where(positive, torch.zeros_like(time))
+    return a, _step_mean(step / safe_tau).where(positive, torch.zeros_like(time))
+
+
+def _step_mean(ratio: torch.Tensor) -> torch.Tensor:
+    """(1 − exp(−x))/x, the mean of exp(−s/τ) over a step of x = Δt/τ, and 1 at x = 0."""
+    moving = ratio > 0
+    safe = ratio.where(moving, torch.ones_like(ratio))
+    return (-torch.expm1(-safe) / safe).where(moving, torch.ones_like(ratio))
 
 
 def first_order_lag(
@@ -47,7 +56,43 @@ def first_order_lag(
 def relaxation_integral(
     signal: torch.Tensor, relaxation_time: torch.Tensor, time: torch.Tensor, start: torch.Tensor
 ) -> torch.Tensor:
-    """q(t) = ∫₀ᵗ exp(−(t−s)/τ) ds'(s) ds from each curve start, exact for s linear between samples."""
+    """q(t) = ∫₀ᵗ exp(−(t−s)/τ) ds'(s) ds from each curve start, exact for s linear between samples.
+
+    ``relaxation_time`` τ: (S,), or (M, 1) for M modes at once (result (M, S))."""
     a, weight = _decay(time, start, relaxation_time)
     increment = torch.diff(signal, prepend=signal[:1])
     return linear_recurrence(a, (increment * weight).where(~start, torch.zeros_like(signal)))
+
+
+def hereditary_inverse(
+    target: torch.Tensor,
+    extra: torch.Tensor,
+    weights: torch.Tensor,
+    times: torch.Tensor,
+    time: torch.Tensor,
+    block: int = 25,
+) -> torch.Tensor:
+    """F on one curve's samples with F + extra·(F − F₀) + Σ_m weights_m·q_m = target, q_m the relaxation
+    integral of F with τ_m = ``times`` (M,) (exact for F linear between samples, as ``relaxation_integral``).
+
+    The operator is causal with a positive diagonal, so it is solved exactly by block forward substitution:
+    ``block`` samples at a time, a dense lower-triangular system in the increments of F, the modes carried
+    from block to block — where a fixed point F ← target − Σ(…) diverges once the memory outweighs F
+    (g > 1, or a power law's weight on the last step)."""
+    first = target[0]
+    values, modes = [first[None]], torch.zeros_like(times)
+    for begin in range(1, time.numel(), block):
+        end = min(begin + block, time.numel())
+        since = time[begin:end, None] - time[None, begin - 1 : end]  # (B, B + 1): t_i − t_k, k from begin − 1
+        decay = torch.exp(-since.clamp(min=0)[..., None] / times)  # (B, B + 1, M)
+        mean = _step_mean(torch.diff(time[begin - 1 : end])[:, None] / times)  # (B, M): each step's mean
+        lower = torch.ones(end - begin, end - begin, dtype=torch.bool, device=time.device).tril()
+        memory = (decay[:, 1:] * mean * weights).sum(-1).where(lower, torch.zeros_like(since[:, 1:]))
+        system = (1 + extra) * lower.to(time.dtype) + memory
+        carried = decay[:, 0] @ (weights * modes)
+        previous = values[-1][-1]
+        rhs = target[begin:end] + extra * first - (1 + extra) * previous - carried
+        increments = torch.linalg.solve_triangular(system, rhs[:, None], upper=False)[:, 0]
+        values.append(previous + torch.cumsum(increments, 0))
+        modes = decay[-1, 0] * modes + (decay[-1, 1:] * mean).T @ increments
+    return torch.cat(values)

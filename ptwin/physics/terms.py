@@ -21,6 +21,7 @@ from typing import ClassVar
 import torch
 from torch import nn
 
+from ptwin.physics.power_law import kernel_for, ting_integral
 from ptwin.physics.recurrence import first_order_lag, relaxation_integral
 from ptwin.physics.samples import Samples
 
@@ -146,6 +147,12 @@ class Term(nn.Module):
     def elastic_force(self, samples: Samples, elastic: torch.Tensor) -> torch.Tensor | None:
         return None
 
+    def elastic_modes(self, samples: Samples) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+        """A hereditary term (``ACTS_ON_ELASTIC``) as exponential modes on the time scales of ``samples``:
+        (extra, weights (M,), relaxation times (M,) [s]) with elastic_force(F) = extra·(F − F(0)) +
+        Σ_m weights_m ∫ exp(−(t − s)/τ_m) dF/ds ds — what the self-consistent law inverts exactly."""
+        return None
+
 
 class SolidViscosity(Term):
     """Kelvin–Voigt viscous network: + π γ R U (gamma [Pa s])."""
@@ -178,6 +185,30 @@ class SolidRelaxation(Term):
     def elastic_force(self, samples, elastic):
         tau = self.value("tau").expand_as(elastic)
         return self.value("g") * relaxation_integral(elastic, tau, samples.time, samples.start)
+
+    def elastic_modes(self, samples):
+        return torch.zeros_like(self.value("g")), self.value("g")[None], self.value("tau")[None]
+
+
+class PowerLawRheology(Term):
+    """Power-law network (cells, many gels): E(t) = E*·(t/t0)^(−alpha), t0 = 1 s, through Ting's hereditary
+    integral of the elastic law over any base history (alpha [–], 0 ≤ alpha < 0.5)."""
+
+    name = "power_law_rheology"
+    PARAMS = {"alpha": Parameter("–", 0.05, minimum=0.0, maximum=0.5, plausible=(0.0, 0.5))}
+    STARTS = [{"alpha": alpha} for alpha in (0.02, 0.1, 0.3)]
+    TELL_APART = (
+        "a hold at constant depth (the force relaxes as t^(−alpha) over seconds, where Darcy's relaxes in "
+        "milliseconds) or a third speed further apart (it grows as speed^alpha, Darcy's as speed)"
+    )
+    ACTS_ON_ELASTIC = True
+
+    def elastic_force(self, samples, elastic):
+        return ting_integral(elastic, self.value("alpha"), samples.time, samples.start) - elastic
+
+    def elastic_modes(self, samples):
+        c0, weights, times = kernel_for(self.value("alpha"), samples.time)
+        return c0 - 1, weights, times
 
 
 class PorePressureRelaxation(Term):
@@ -238,6 +269,7 @@ VOCABULARY: dict[str, type[Term]] = {
         SolidViscosity,
         SolidRelaxation,
         PorePressureRelaxation,
+        PowerLawRheology,
         StrainDependentPermeability,
         CantileverDrag,
         ContactOffset,

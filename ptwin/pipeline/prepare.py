@@ -9,7 +9,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import torch
 
-from ptwin.data.evidence import SPOT_VARIATION, drag_from_baselines, spot_variation
+from ptwin.data.evidence import SPOT_VARIATION, RateEffect, drag_from_baselines, rate_effect, spot_variation
 from ptwin.data.kinematics import CurveKinematics, curve_kinematics
 from ptwin.data.noise import NoiseModel, pooled
 from ptwin.data.recordings import Meta, RecordingError, RecordingSet, load_recordings
@@ -80,6 +80,7 @@ class Prepared:
     make_model: ModelFactory
     noise: NoiseModel  # the set's
     notes: list[str] = field(default_factory=list)  # evidence about the data, in sentences
+    rate: RateEffect | None = None  # F/F_ref at equal depth of the faster approaches
 
     @property
     def noise_floor(self) -> float:
@@ -110,8 +111,10 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     factory = ModelFactory(
         meta, law, basis, settings.model, settings.permeability, settings.device, settings.seed, contact_ids
     )
-    notes += [sentence for sentence in (_spot_note(curves), drag_from_baselines(curves)) if sentence]
-    return Prepared(recordings, curves, basis, samples, split, factory, noise, notes)
+    rate = rate_effect(curves, reference)
+    evidence = (_spot_note(curves), drag_from_baselines(curves), rate.sentence() if rate else None)
+    notes += [sentence for sentence in evidence if sentence]
+    return Prepared(recordings, curves, basis, samples, split, factory, noise, notes, rate)
 
 
 def _fitted_curves(recordings: RecordingSet, curves, reference) -> tuple[list[CurveKinematics], list[str]]:

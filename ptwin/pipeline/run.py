@@ -69,7 +69,15 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     )
     corrected_per_curve = _corrected_per_curve(prepared, diagnosis, iterations)
     figures = save_figures(
-        output_dir, samples, split, identification, outcome.twin, diagnosis, corrected_per_curve, progress
+        output_dir,
+        samples,
+        split,
+        identification,
+        outcome.twin,
+        diagnosis,
+        corrected_per_curve,
+        prepared.rate,
+        progress,
     )
     results = _results(prepared, identification, settings)
     results["stages"]["hybrid"] = hybrid_stage(outcome, samples, split, settings.optim.hybrid)

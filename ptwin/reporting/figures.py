@@ -46,13 +46,14 @@ def _per_speed(samples, index, series: dict, ylabel: str, title: str, residual=F
 
 
 def save_figures(
-    output_dir: Path, samples, split, identification, twin, diagnosis, corrected_per_curve, progress=print
+    output_dir: Path, samples, split, identification, twin, diagnosis, corrected_per_curve, rate=None, progress=print
 ):
     """Write every figure as PNG into ``output_dir``; returns {name: figure} for TensorBoard.
 
     ``identification``: stages 1–2 (``base``, ``apparent``, ``viscous_per_curve``); ``twin``: the hybrid
-    twin; ``corrected_per_curve``: K per curve of the corrected model, or None. A figure matplotlib
-    cannot draw from these data is left out with one line saying so.
+    twin; ``corrected_per_curve``: K per curve of the corrected model, or None; ``rate``: the rate effect
+    before any model (``ptwin.data.evidence.RateEffect``), or None. A figure matplotlib cannot draw from
+    these data is left out with one line saying so.
     """
     base, apparent = identification.base, identification.apparent
     with torch.no_grad():  # evaluated where the models live, plotted from the CPU
@@ -84,6 +85,8 @@ def save_figures(
             residual=True,
         ),
     }
+    if rate is not None:
+        builders["rate_effect"] = lambda: _rate_effect(rate)
     if bool((samples.segment == 1).any()):
         series = {"base": base_force, **({"corrected": corrected} if corrected is not None else {})}
         builders["holds_force_time"] = lambda: _holds(samples, series)
@@ -103,6 +106,23 @@ def save_figures(
         plt.close(figure)
         figures[name] = figure
     return figures
+
+
+def _rate_effect(rate):
+    """F/F_ref at equal depth of each faster approach: flat for a multiplicative effect (a power law, or a
+    Darcy force ∝ R³ of a sphere), and how far above 1 for each speed."""
+    figure, ax = plt.subplots(figsize=(6.5, 4))
+    colours = plt.cm.viridis(np.linspace(0, 0.9, len(rate.profiles)))
+    for profile, colour in zip(rate.profiles, colours):
+        label = f"{profile.curve} ({profile.speed_ratio:.3g}× the speed)"
+        ax.plot(profile.depth * MICRO, profile.ratio, "o-", ms=3, color=colour, label=label)
+    ax.axhline(1.0, color="grey", lw=0.8)
+    ax.set_xlabel("depth w [µm]")
+    ax.set_ylabel(f"F / F_{rate.reference} at equal depth")
+    ax.set_title("Rate effect before any model")
+    ax.legend(fontsize=7)
+    figure.tight_layout()
+    return figure
 
 
 def _holds(samples, series: dict):

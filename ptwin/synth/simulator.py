@@ -32,6 +32,7 @@ from ptwin.data.recordings import Meta
 from ptwin.pgd.reference import force_coefficient
 from ptwin.physics.elastic import hertz_force, hertz_stiffness
 from ptwin.physics.fluid_force import FluidForce
+from ptwin.physics.power_law import kernel_modes
 from ptwin.physics.terms import VOCABULARY
 
 # The vocabulary terms this simulator conceals (each is integrated below), their parameters from the term classes.
@@ -39,6 +40,7 @@ SIMULATED = (
     "solid_viscosity",
     "solid_relaxation",
     "pore_pressure_relaxation",
+    "power_law_rheology",
     "strain_dependent_permeability",
     "cantilever_drag",
     "contact_offset",
@@ -164,7 +166,8 @@ def simulate_curve(
     force balance's residual (zeros; it costs a model evaluation per sample)."""
     e = replace(experiment, effective_modulus=effective_modulus or experiment.effective_modulus)
     drag = e.param("cantilever_drag", "b") * speed
-    rates = _balance(e, speed, drag)
+    kernel = power_law_modes(e, speed, hold)
+    rates = _balance(e, speed, drag, kernel)
     contact_time = (drag / e.spring_constant - e.z_start) / speed  # tip reaches the surface: z − drag/k = 0
     # Time since contact keeps the first, tiny steps representable. Right after contact every force is
     # negligible and the tip moves with the base: start on w = v·τ0.
@@ -173,7 +176,7 @@ def simulate_curve(
         first = 1e-9 * (time[-1] - contact_time)
         after = time > contact_time + first
         states = _integrate(
-            rates, (first, time[-1] - contact_time), [speed * first, 0.0, 0.0], e, time[after] - contact_time
+            rates, (first, time[-1] - contact_time), _start(rates, speed * first), e, time[after] - contact_time
         )
         return _record(e, speed, drag, time, after, states, np.zeros(time.size, dtype=np.int64), rates, balance)
     step = float(np.diff(e.time(speed)[:2])[0])
@@ -185,24 +188,24 @@ def simulate_curve(
     ramp = solve_ivp(
         rates,
         (first, 10.0 * (e.z_end - e.z_start) / speed),
-        [speed * first, 0.0, 0.0],
+        _start(rates, speed * first),
         method="Radau",
         rtol=e.rtol,
-        atol=[1e-15, 1e-17, 1e-17],
+        atol=_tolerance(rates),
         events=reached,
         dense_output=True,
     )
     if not ramp.success or not ramp.t_events[0].size:
         raise RuntimeError(f"simulation of the {curve_id(speed)} ramp to {hold.depth:.3g} m failed: {ramp.message}")
     stop = ramp.t_events[0][0]
-    held = _balance(e, 0.0, drag, stop * speed)
+    held = _balance(e, 0.0, drag, kernel, stop * speed)
     fixed = solve_ivp(
         held,
         (stop, stop + max(hold.seconds, 1e-12 * stop)),
         ramp.y_events[0][0],
         method="Radau",
         rtol=e.rtol,
-        atol=[1e-15, 1e-17, 1e-17],
+        atol=_tolerance(rates),
         dense_output=True,
     )
     time = np.arange(0.0, contact_time + stop + hold.seconds, step)
@@ -214,10 +217,11 @@ def simulate_curve(
     return _record(e, speed, drag, time, after, states, segment, rates, balance, held, stop)
 
 
-def _balance(e: Experiment, speed: float, drag: float, stopped: float | None = None):
-    """The state equations (w, q, F_p)' of the force balance k(z − w) = F_el + g·q + F_fluid + π·γ·R·ẇ
-    (+ b·v), in time since contact, the base moving at ``speed`` (or fixed at ``stopped`` past the contact,
-    where the drag b·v has ended); ``balance=True``: the balance's residual instead [N]."""
+def _balance(e: Experiment, speed: float, drag: float, kernel, stopped: float | None = None):
+    """The state equations (w, q, F_p, q_j)' of the force balance k(z − w) = c0·F_el + Σ c_j q_j + g·q +
+    F_fluid + π·γ·R·ẇ (+ b·v), in time since contact, the base moving at ``speed`` (or fixed at
+    ``stopped`` past the contact, where the drag b·v has ended); ``kernel``: the power law's (c0, c_j, τ_j);
+    ``balance=True``: the balance's residual instead [N]."""
     rho, k, mu, H0 = e.probe_radius, e.spring_constant, e.fluid_viscosity, e.sample_thickness
     gamma = e.param("solid_viscosity", "gamma")
     g, tau = e.param("solid_relaxation", "g"), e.param("solid_relaxation", "tau", 1.0)
@@ -225,16 +229,18 @@ def _balance(e: Experiment, speed: float, drag: float, stopped: float | None = N
     m = e.param("strain_dependent_permeability", "m")
     lagging = "pore_pressure_relaxation" in e.effects
     coefficient = fluid_coefficient_law(e)
+    c0, weights, times = kernel
 
     def rates(since_contact, state, balance=False):
-        w, q, pore = state
+        w, q, pore, *modes = state
         radius = contact_radius(np.array([w]), rho)[0]
         permeability = e.permeability * np.exp(-m * w / rho)
         fluid_coefficient = coefficient(radius, H0 - w, permeability)
         stiffness = hertz_stiffness(np.array([w]), e.effective_modulus, rho)[0]
         # k(z − w) − drag with z − drag/k = v·τ exactly: no cancellation at first contact.
         base = speed * since_contact if stopped is None else stopped + drag / k
-        unbalanced = k * (base - w) - hertz_force(np.array([w]), e.effective_modulus, rho)[0] - g * q
+        unbalanced = k * (base - w) - c0 * hertz_force(np.array([w]), e.effective_modulus, rho)[0] - weights @ modes
+        unbalanced = unbalanced - g * q
         if not lagging:
             w_rate = unbalanced / (fluid_coefficient + np.pi * gamma * radius)
             pore_rate, pore = 0.0, fluid_coefficient * w_rate
@@ -243,19 +249,39 @@ def _balance(e: Experiment, speed: float, drag: float, stopped: float | None = N
             if gamma > 0:
                 w_rate = (unbalanced - pore) / (np.pi * gamma * radius)
             else:
-                w_rate = (k * speed + g * q / tau + pore / tau_p) / (
-                    k + (1 + g) * stiffness + fluid_coefficient / tau_p
+                w_rate = (k * speed + g * q / tau + (weights / times) @ modes + pore / tau_p) / (
+                    k + (c0 + g + weights.sum()) * stiffness + fluid_coefficient / tau_p
                 )
             pore_rate = (fluid_coefficient * w_rate - pore) / tau_p
         if balance:
             return unbalanced - pore - np.pi * gamma * radius * w_rate
-        return [w_rate, stiffness * w_rate - q / tau, pore_rate]
+        return [w_rate, stiffness * w_rate - q / tau, pore_rate, *(stiffness * w_rate - np.asarray(modes) / times)]
 
+    rates.states = 3 + times.size  # w, q, F_p and one state per power-law mode
     return rates
 
 
+def _start(rates, depth: float) -> list[float]:
+    return [depth] + [0.0] * (rates.states - 1)
+
+
+def _tolerance(rates) -> list[float]:
+    return [1e-15] + [1e-17] * (rates.states - 1)
+
+
+def power_law_modes(e: Experiment, speed: float, hold: Hold | None):
+    """(c0, weights, relaxation times [s]) of the power-law kernel over a curve's time scales (its
+    sampling step to ten times its duration); (1, [], []) without the term: Ting's integral is then F."""
+    if "power_law_rheology" not in e.effects:
+        return 1.0, np.zeros(0), np.ones(0)
+    duration = (e.z_end - e.z_start) / speed + (hold.seconds if hold else 0.0)
+    alpha = torch.tensor(e.param("power_law_rheology", "alpha"), dtype=torch.float64)
+    c0, weights, times = kernel_modes(alpha, float(np.diff(e.time(speed)[:2])[0]), 10 * duration)
+    return float(c0), weights.numpy(), times.numpy()
+
+
 def _integrate(rates, span, start, e: Experiment, times) -> np.ndarray:
-    solution = solve_ivp(rates, span, start, method="Radau", t_eval=times, rtol=e.rtol, atol=[1e-15, 1e-17, 1e-17])
+    solution = solve_ivp(rates, span, start, method="Radau", t_eval=times, rtol=e.rtol, atol=_tolerance(rates))
     if not solution.success:
         raise RuntimeError(f"simulation failed: {solution.message}")
     return solution.y

@@ -1,0 +1,46 @@
+"""The rate effect before any model: F/F_ref at equal depth, and how its excess grows with speed."""
+
+import math
+
+import pytest
+
+from ptwin.data.evidence import rate_effect
+from ptwin.data.kinematics import curve_kinematics
+from ptwin.data.recordings import load_recordings, write_recordings
+from ptwin.synth.simulator import Experiment, simulate
+
+pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+# A stiff cantilever at three speeds on a gel too permeable for Darcy to show: the tip follows the base, so
+# a power law scales the force at equal depth by (v/v_ref)^alpha exactly (Ting's integral on a ramp), and a
+# Kelvin–Voigt network adds π·γ·R·v.
+STIFF = dict(
+    spring_constant=20.0, permeability=1e-14, base_speeds=(2e-6, 6e-6, 18e-6), samples=300, noise_std=1e-10, seed=3
+)
+
+
+def effect_of(tmp_path, **effects):
+    write_recordings(tmp_path, *simulate(Experiment(**STIFF, effects=effects)))
+    curves = curve_kinematics(load_recordings(tmp_path))
+    return rate_effect(curves, curves[0])
+
+
+def test_a_power_law_scales_the_force_by_the_speed_ratio_to_the_alpha(tmp_path):
+    effect = effect_of(tmp_path, power_law_rheology={"alpha": 0.05})
+    for profile in effect.profiles:
+        assert profile.median == pytest.approx(profile.speed_ratio**0.05, abs=2e-3)
+        shallow, deep = profile.ends()
+        assert abs(deep - shallow) < 5e-3  # flat: a multiplicative effect
+    assert "grows more slowly than linearly with speed, as a power law" in effect.sentence()
+
+
+def test_a_viscous_network_adds_an_excess_that_grows_linearly_with_speed(tmp_path):
+    effect = effect_of(tmp_path, solid_viscosity={"gamma": 40.0})
+    assert "grows linearly with speed" in effect.sentence()
+
+
+def test_one_speed_ratio_says_it_cannot_tell_the_growth(tmp_path):
+    write_recordings(tmp_path, *simulate(Experiment(**{**STIFF, "base_speeds": (2e-6, 6e-6)})))
+    curves = curve_kinematics(load_recordings(tmp_path))
+    sentence = rate_effect(curves, curves[0]).sentence()
+    assert "One speed ratio cannot show" in sentence and not any(w in sentence for w in ("nan", "inf"))
+    assert math.isfinite(rate_effect(curves, curves[0]).profiles[0].median)
