@@ -40,7 +40,7 @@ from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.noise import NoiseModel
 from ptwin.data.recordings import Meta, RecordingSet
 from ptwin.fitting.lm import FitError
-from ptwin.fitting.physics_fit import PhysicsFit, fit_physics, scaled_residual
+from ptwin.fitting.physics_fit import PhysicsFit, cheapest, fit_physics
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 from ptwin.synth.simulator import SIMULATED, CurveSimulation, Experiment, Hold, simulate_curve
@@ -256,17 +256,7 @@ class ExperimentDesign:
             starts = [fit.params] + [
                 {t: {**fit.params[t], **start} for t, start in zip(fit.terms, combo)} for combo in combos
             ]
-        best, best_cost = None, math.inf
-        for values in starts:
-            model = self.make_model(fit.terms, values, fit.permeability)
-            vector, residual = scaled_residual(model, samples, index)
-            try:
-                with torch.no_grad():
-                    cost = residual(vector.get()).square().sum().item()
-            except (ValueError, RuntimeError):
-                continue
-            if cost < best_cost:
-                best, best_cost = model, cost
+        best = cheapest((self.make_model(fit.terms, values, fit.permeability) for values in starts), samples, index)
         if best is None:
             return math.inf
         try:

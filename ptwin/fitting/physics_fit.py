@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import torch
@@ -162,9 +163,17 @@ def fit_with_starts(make_model, terms: tuple[str, ...], samples: Samples, index:
     starts = [dict(zip(terms, combo)) for combo in itertools.product(*(VOCABULARY[t].STARTS for t in terms))]
     if len(starts) == 1:
         return fit_physics(make_model(terms, starts[0]), samples, index, iterations)
+    best = cheapest((make_model(terms, values) for values in starts), samples, index)
+    if best is None:
+        raise FitError("the model cannot be evaluated at any of its starting values")
+    return fit_physics(best, samples, index, iterations)
+
+
+def cheapest(models: Iterable[ForceModel], samples: Samples, index: torch.Tensor) -> ForceModel | None:
+    """The model of ``models`` (built one at a time) with the least cost on ``samples[index]`` as it stands:
+    where a fit should start. Models that cannot be evaluated there are skipped; None if none can be."""
     best, best_cost = None, math.inf
-    for values in starts:
-        model = make_model(terms, values)
+    for model in models:
         vector, residual = scaled_residual(model, samples, index)
         try:
             with torch.no_grad():
@@ -173,6 +182,4 @@ def fit_with_starts(make_model, terms: tuple[str, ...], samples: Samples, index:
             continue
         if cost < best_cost:
             best, best_cost = model, cost
-    if best is None:
-        raise FitError("the model cannot be evaluated at any of its starting values")
-    return fit_physics(best, samples, index, iterations)
+    return best
