@@ -17,7 +17,8 @@ LAYERS = [
     ("diagnosis",),
     ("reporting",),
     ("pipeline",),
-    ("app", "map"),
+    ("app",),
+    ("map",),  # a Hydra face, on what app.py shares
 ]
 RANK = {room: rank for rank, rooms in enumerate(LAYERS) for room in rooms}
 MODULES = sorted((ROOT / "ptwin").rglob("*.py"))

@@ -108,3 +108,33 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     name.fit_candidates(None, samples, split, ["a", "b", "c"], max_terms, 1, 50, 5.0, progress=lambda line: None)
     assert max(len(t) for t in fitted) == largest
     assert sum(len(t) == largest for t in fitted) == {1: 3, 2: 3, 3: 1}[largest]
+
+
+@pytest.mark.parametrize(("base_whiteness", "largest"), [(2.0, 1), (50.0, 2)])
+def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leaves_structure(
+    monkeypatch, base_whiteness, largest
+):
+    """Every single term non-physical (a null set: each drifts off to a negative parameter) and the base
+    model's residual white: nothing is left to explain, so no pair is fitted (they were, once: 21 fits)."""
+    import torch
+
+    import ptwin.diagnosis.name as name
+
+    fitted = []
+
+    def fit_with_starts(make_model, subset, samples, index, iterations):
+        fitted.append(subset)
+        fit = candidate(
+            subset, 1000.0, 1.0, violations={t: "p < 0" for t in subset[:1]} if len(subset) == 1 else {}
+        ).fit
+        fit.model = lambda samples: samples.force + len(subset)
+        return fit
+
+    whiteness = {0: base_whiteness, 1: 1.0, 2: 1.0}
+    monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
+    monkeypatch.setattr(name, "rmse", lambda *args: 1.0)
+    monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
+    samples = type("Samples", (), {"force": torch.zeros(10)})()
+    split = type("Split", (), {"train": torch.arange(5), "val": torch.arange(5, 8)})()
+    name.fit_candidates(None, samples, split, ["a", "b", "c"], 2, 1, 50, 5.0, progress=lambda line: None)
+    assert max(len(t) for t in fitted) == largest

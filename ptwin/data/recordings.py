@@ -42,6 +42,7 @@ class Meta:
     contact_point: str = "known"
     noise_std: float | None = None  # [N]
     notes: str = ""
+    position: tuple[float, float] | None = None  # (x, y) [m]: the spot's place in a force map
 
 
 @dataclass
@@ -77,6 +78,8 @@ def write_recordings(path: str | Path, meta: Meta, curves: pd.DataFrame) -> None
     folder = Path(path)
     folder.mkdir(parents=True, exist_ok=True)
     values = {"format": FORMAT, **{k: v for k, v in asdict(meta).items() if v not in (None, "")}}
+    if meta.position is not None:
+        values["position"] = [float(c) for c in meta.position]
     (folder / "meta.yaml").write_text(yaml.safe_dump(values, sort_keys=False))
     curves.to_csv(folder / "curves.csv", index=False, float_format="%.17g")
 
@@ -118,7 +121,20 @@ def _read_meta(file: Path) -> Meta:
         contact_point=contact,
         noise_std=None if noise is None else _positive_number(file, "noise_std", noise),
         notes=str(values.get("notes", "")),
+        position=_position(file, values.get("position")),
     )
+
+
+def _position(file: Path, value) -> tuple[float, float] | None:
+    if value is None:
+        return None
+    try:
+        x, y = (float(c) for c in value)
+    except (TypeError, ValueError):
+        raise RecordingError(f"{file}: position {value!r} is not [x, y]; write two numbers in metres") from None
+    if not (math.isfinite(x) and math.isfinite(y)) or max(abs(x), abs(y)) > 1e-2:
+        raise RecordingError(f"{file}: position {value!r} is not a place on a sample in metres; write e.g. [5.0e-6, 0]")
+    return x, y
 
 
 def _positive_number(file: Path, key: str, value) -> float:

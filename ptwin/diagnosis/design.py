@@ -194,18 +194,13 @@ class ExperimentDesign:
     def _experiment(self, fit: PhysicsFit) -> Experiment:
         """The simulator's experiment of a fitted candidate."""
         meta = self.meta
-        law = fit.model.reference
-        depth = law.depth_nodes.numpy()
-        shape = 4.0 / 3.0 * math.sqrt(meta.probe_radius) * depth**1.5
-        elastic = fit.model.elastic_nodes().detach().numpy()
-        modulus = float(shape @ elastic / (shape @ shape))  # the Hertz modulus of its own law
         return Experiment(
             probe_radius=meta.probe_radius,
             spring_constant=meta.spring_constant,
             sample_thickness=meta.sample_thickness,
             fluid_viscosity=meta.fluid_viscosity,
             permeability=fit.permeability,
-            effective_modulus=modulus,
+            effective_modulus=fit.model.hertz_modulus(),  # that of its own law
             z_start=-self.free_travel,
             sample_rate=1.0 / self.step,
             noise_std=0.0,

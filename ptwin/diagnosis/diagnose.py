@@ -121,8 +121,8 @@ def diagnose(
     make_model: Callable,
     samples: Samples,
     split: Split,
-    hybrid: HybridTwin,
-    apparent: ApparentPermeability,
+    hybrid: HybridTwin | None,
+    apparent: ApparentPermeability | None,
     settings: DiagnosisSettings,
     iterations: int,
     noise: NoiseModel,
@@ -134,7 +134,8 @@ def diagnose(
     """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); candidate fits run
     ``iterations`` LM steps; ``noise`` is the set's noise model; ``base_fit``: the base model already
     fitted so on ``split.train``, if any; ``notes``: evidence about the data, in sentences; ``design``:
-    what proposes the next experiment of each confounded group (None: none proposed)."""
+    what proposes the next experiment of each confounded group (None: none proposed); ``hybrid``: the
+    trained hybrid twin, whose learned error the named terms are compared with (None: not trained)."""
     s = settings
     seen = torch.cat([split.train, split.val]).sort().values
     progress("diagnosis: fitting the base model and the candidate terms (K refitted with each)")
@@ -163,10 +164,13 @@ def diagnose(
                 group["next_experiment"], prediction = proposal
                 predictions.append(prediction)
     progress("diagnosis: the named terms on curves left out of the fit, and intervals under the noise model")
-    with torch.no_grad():
-        learned = hybrid.network(samples)[seen]
-        named = corrected.fit.model(samples)[seen] - base.fit.model(samples)[seen]
-    context = _Context(samples, split, seen, candidates, corrected, fit, noise, _explained_fraction(learned, named))
+    witness = None
+    if hybrid is not None:
+        with torch.no_grad():
+            learned = hybrid.network(samples)[seen]
+            named = corrected.fit.model(samples)[seen] - base.fit.model(samples)[seen]
+        witness = _explained_fraction(learned, named)
+    context = _Context(samples, split, seen, candidates, corrected, fit, noise, witness)
     left_out = [_left_out_entry(term, chosen, context, rivals, make_model, s, pick.weak) for term in chosen]
     left_out.sort(key=lambda entry: -entry["test_rmse_gain"])
     diagnosis = Diagnosis(
@@ -267,18 +271,23 @@ class _Context:
     corrected: Candidate
     fit: dict[str, dict[str, float]]
     noise: NoiseModel
-    witness: float  # share of the hybrid network's learned error the named terms account for
+    witness: float | None  # share of the hybrid network's learned error the named terms account for (None: no twin)
 
 
 def _test_rmse(candidate: Candidate, samples: Samples, split: Split) -> float:
     return rmse(candidate.fit.model, samples, split.test)
 
 
-def _fit_table(samples, split, base: Candidate, corrected: Candidate, hybrid: HybridTwin) -> dict:
+def _fit_table(samples, split, base: Candidate, corrected: Candidate, hybrid: HybridTwin | None) -> dict:
+    """RMS [N] on the validation and test samples; the hybrid twin's None when it was not trained."""
+    if hybrid is None:
+        twin = {"val_rmse": None, "test_rmse": None}
+    else:
+        twin = {"val_rmse": rmse_of(hybrid, samples, split.val), "test_rmse": rmse_of(hybrid, samples, split.test)}
     return {
         "base": {"val_rmse": base.val_rmse, "test_rmse": _test_rmse(base, samples, split)},
         "corrected": {"val_rmse": corrected.val_rmse, "test_rmse": _test_rmse(corrected, samples, split)},
-        "hybrid": {"val_rmse": rmse_of(hybrid, samples, split.val), "test_rmse": rmse_of(hybrid, samples, split.test)},
+        "hybrid": twin,
     }
 
 
@@ -329,7 +338,9 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut |
     )
     if held_out is not None:
         sentence += f"; on curves left out of the fit it predicts {held_out.gain:.2f}× better"
-    sentence += f"; it accounts for {100 * c.witness:.0f}% of the error the hybrid network learned."
+    if c.witness is not None:
+        sentence += f"; it accounts for {100 * c.witness:.0f}% of the error the hybrid network learned"
+    sentence += "."
     correlated = [
         name for name, value in corrected.fit.correlation_with_permeability[term].items() if abs(value) > CORRELATED
     ]

@@ -69,9 +69,9 @@ def fit_candidates(
     progress: Callable[[str], None] = print,
     fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
 ) -> dict[tuple[str, ...], Candidate]:
-    """Fits of the base model, every single term and, while the best subset of k − 1 terms leaves
-    structure, every subset of k ≤ ``max_terms`` terms, on the train split. A fit that fails is kept
-    with its reason (``Candidate.failure``) and left out of every choice.
+    """Fits of the base model, every single term and, while the best usable subset of k − 1 terms (none
+    usable: the best smaller one) leaves structure, every subset of k ≤ ``max_terms`` terms, on the train
+    split. A fit that fails is kept with its reason (``Candidate.failure``) and left out of every choice.
 
     ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are.
     """
@@ -88,7 +88,9 @@ def fit_candidates(
 
     add(())
     for size in range(1, max_terms + 1):
+        # The best usable subset one term smaller (none usable: the best smaller one, the base model at least).
         previous = [c for t, c in candidates.items() if len(t) == size - 1 and c.usable]
+        previous = previous or [c for t, c in candidates.items() if len(t) < size and c.usable]
         best = min(previous, key=lambda c: c.fit.bic, default=None)
         if size > 1 and best is not None and best.whiteness <= threshold:
             break

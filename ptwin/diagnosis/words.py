@@ -39,9 +39,10 @@ def summarise(d, apparent, threshold: float) -> str:
         return sentence + _permeability_not_fixed(d) + _to_tell_apart(d.confounded)
     sentence = _where(d, ratio, threshold) + _trend(apparent)
     if d.unexplained:
+        kept = "the hybrid network's correction is kept, and " if d.fit["hybrid"]["val_rmse"] is not None else ""
         return sentence + (
-            "No term of the vocabulary explains the residual: the hybrid network's correction is kept, and K "
-            f"({d.permeability['corrected']:.3g} m²) comes from a model that misses the data, so no interval is given."
+            f"No term of the vocabulary explains the residual: {kept}K ({d.permeability['corrected']:.3g} m²) "
+            "comes from a model that misses the data, so no interval is given."
         )
     entries = d.left_out
     names = " and ".join(entry["term"] for entry in entries)
@@ -108,7 +109,9 @@ def _where(d, ratio: float, threshold: float) -> str:
 
 
 def _trend(apparent) -> str:
-    """The trend of the plateau permeability with speed, where there is one to measure."""
+    """The trend of the plateau permeability with speed, where there is one to measure (and it was)."""
+    if apparent is None:
+        return ""
     if not (math.isfinite(apparent.slope) and math.isfinite(apparent.slope_std)):
         return "The plateau permeability cannot be compared across speeds (fewer than two fitted speeds). "
     return (

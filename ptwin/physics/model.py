@@ -130,6 +130,12 @@ class ForceModel(nn.Module):
         index, t = self.reference.bracket(depth)
         return self.elastic_nodes(permeability, index) * (1 - t) + self.elastic_nodes(permeability, index + 1) * t
 
+    def hertz_modulus(self) -> float:
+        """E* [Pa] of the Hertz law F = 4/3·E*·√ρ·w^1.5 closest (least squares) to this model's elastic law."""
+        with torch.no_grad():
+            shape = 4.0 / 3.0 * self.probe_radius**0.5 * self.reference.depth_nodes.clamp(min=0.0) ** 1.5
+            return float(shape @ self.elastic_nodes() / (shape @ shape))
+
     def components(self, samples: Samples, permeability: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """{'elastic': F_el, 'fluid': F_D or F_p, term name: its added force} [N], each (S,);
         ``permeability``: K [m²] instead of the model's, one or one per sample (stage 1's K(w))."""

@@ -26,13 +26,17 @@ VISCOUS = SolidViscosity  # the term of stage 2
 @dataclass
 class Identification:
     base: PhysicsFit  # stage 1, on the train split
-    apparent: ApparentPermeability
+    apparent: ApparentPermeability | None  # None: not computed (a map's spot)
     viscous: PhysicsFit | None  # stage 2, on the train split (None: the fit failed)
     viscous_per_curve: dict[str, PhysicsFit]
     viscous_term: str = VISCOUS.name
 
 
-def identify(prepared: Prepared, optim: OptimSettings, progress: Callable[[str], None] = print) -> Identification:
+def identify(
+    prepared: Prepared, optim: OptimSettings, progress: Callable[[str], None] = print, chain: bool = True
+) -> Identification:
+    """Stages 1 and 2 on the train split; ``chain=False``: the global K of the base model only (a map's spots:
+    the diagnosis tries the viscous term among the others, and no figure shows K(w))."""
     samples, train, make_model = prepared.samples, prepared.split.train, prepared.make_model
     iterations = optim.physics_fit.iterations
     progress("stage 1: global K (elastic + Darcy) and the pointwise apparent K(w)")
@@ -43,6 +47,8 @@ def identify(prepared: Prepared, optim: OptimSettings, progress: Callable[[str],
             f"{prepared.recordings.path}: the base model cannot be fitted to these curves ({error}); check the "
             f"probe radius, spring constant and sample thickness in meta.yaml"
         ) from None
+    if not chain:
+        return Identification(base, None, None, {})
     p = optim.pointwise
     apparent = apparent_permeability(base.model, samples, base.permeability, p.iterations, p.plateau_from)
     progress("stage 2: Gauss–Newton on (K, gamma) with the viscous term, jointly and per speed")

@@ -12,6 +12,7 @@ import torch
 
 from ptwin.diagnosis.design import ExperimentDesign
 from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, diagnose
+from ptwin.fitting.hybrid import HybridTwin
 from ptwin.physics.terms import VOCABULARY
 from ptwin.pipeline.identify import Identification, identify, per_curve_fits
 from ptwin.pipeline.prepare import Prepared, prepare
@@ -51,23 +52,8 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     base_k = identification.base.permeability
     outcome = train_twin(prepared, base_k, noise, settings, output_dir, log.on_step, progress)
     log.end_training()
-    iterations = settings.optim.physics_fit.iterations
-    candidates, notes = _candidates(prepared, settings)
-    diagnosis = diagnose(
-        prepared.make_model,
-        samples,
-        split,
-        outcome.twin,
-        identification.apparent,
-        candidates,
-        iterations,
-        prepared.noise,
-        progress,
-        base_fit=identification.base,
-        notes=notes,
-        design=_design(prepared, settings) if settings.diagnosis.design else None,
-    )
-    corrected_per_curve = _corrected_per_curve(prepared, diagnosis, iterations)
+    diagnosis = diagnose_set(prepared, identification, outcome.twin, settings, progress)
+    corrected_per_curve = _corrected_per_curve(prepared, diagnosis, settings.optim.physics_fit.iterations)
     figures = save_figures(
         output_dir,
         samples,
@@ -95,6 +81,31 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     print_summary(results, payload, progress)
     progress(f"results in {output_dir} ({results['seconds']:.1f} s)")
     return RunResult(results, payload, figures)
+
+
+def diagnose_set(
+    prepared: Prepared,
+    identification: Identification,
+    twin: HybridTwin | None,
+    settings: Settings,
+    progress: Callable[[str], None] = print,
+) -> Diagnosis:
+    """The diagnosis stage on a prepared and identified set (``twin``: the hybrid twin, None when not trained)."""
+    candidates, notes = _candidates(prepared, settings)
+    return diagnose(
+        prepared.make_model,
+        prepared.samples,
+        prepared.split,
+        twin,
+        identification.apparent,
+        candidates,
+        settings.optim.physics_fit.iterations,
+        prepared.noise,
+        progress,
+        base_fit=identification.base,
+        notes=notes,
+        design=_design(prepared, settings) if settings.diagnosis.design else None,
+    )
 
 
 def _candidates(prepared: Prepared, settings: Settings) -> tuple[DiagnosisSettings, list[str]]:

@@ -74,3 +74,23 @@ class Settings:
     cache_dir: str = ".cache/ptwin"  # where PGD bases are kept, keyed by their config hash
     ckpt_path: str | None = None  # a checkpoint.pt to resume from
     permeability: float = 2.0e-16  # starting K [m²]
+
+
+@dataclass
+class MapSettings:
+    """How ``python -m ptwin.map`` runs the spots of a force map (the ``map`` config group)."""
+
+    scheduler: str = "local"  # local: a Dask LocalCluster here; serial: in this process; or a scheduler's address
+    workers: int = 0  # workers of the local cluster (0: one per core)
+    hybrid: bool = False  # train each spot's hybrid twin too (slow; its learned error joins the evidence)
+
+    def __post_init__(self):
+        if self.workers < 0:
+            raise ValueError(f"map.workers must be ≥ 0 (0: one per core), got {self.workers}")
+
+
+@dataclass
+class MapRunSettings(Settings):
+    """Everything ``python -m ptwin.map`` runs on: a spot's settings (``data.path`` is the map's folder)."""
+
+    map: MapSettings = field(default_factory=MapSettings)

@@ -6,6 +6,13 @@ file *outside* the recording folder. Example, the bundled demo:
 
     python -m ptwin.synth --out data/demo --truth data/demo.truth.yaml \\
         --effect pore_pressure_relaxation:M=3.0e4
+
+With ``--map NX NY`` it writes a force map instead (one recording set per spot, K and E*
+varying smoothly over it, the ``--region-effect`` terms concealed inside a disc) and the
+truth per spot as a CSV table:
+
+    python -m ptwin.synth --map 16 16 --out map --truth map.truth.csv --speeds 2e-6 8e-6 40e-6 \\
+        --samples 1000 --region-effect pore_pressure_relaxation:M=3.0e4
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ from pathlib import Path
 import yaml
 
 from ptwin.data.recordings import write_recordings
+from ptwin.synth.maps import MapLayout, write_map
 from ptwin.synth.simulator import EFFECTS, Experiment, Hold, simulate
 
 
@@ -50,25 +58,24 @@ def proposed_holds(diagnosis: Path | None) -> tuple[Hold, ...]:
     return tuple(hold for proposal in distinct for hold in Hold.proposed(proposal))
 
 
-def parse_effects(items: list[str]) -> dict[str, dict[str, float]]:
+def parse_effects(items: list[str], option: str = "--effect") -> dict[str, dict[str, float]]:
     effects: dict[str, dict[str, float]] = {}
     for item in items:
         term, _, assignment = item.partition(":")
         name, _, value = assignment.partition("=")
         if term not in EFFECTS or not name or not value:
-            raise SystemExit(f"--effect {item!r}: write TERM:PARAM=VALUE with TERM one of {', '.join(EFFECTS)}")
+            raise SystemExit(f"{option} {item!r}: write TERM:PARAM=VALUE with TERM one of {', '.join(EFFECTS)}")
         try:
             effects.setdefault(term, {})[name] = float(value)
         except ValueError:
-            raise SystemExit(f"--effect {item!r}: {value!r} is not a number") from None
+            raise SystemExit(f"{option} {item!r}: {value!r} is not a number") from None
     return effects
 
 
-def main(argv: list[str] | None = None) -> None:
-    defaults = Experiment()
+def _parser(defaults: Experiment) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python -m ptwin.synth", description=__doc__.split("\n\n")[1])
     parser.add_argument("--out", required=True, type=Path, help="recording-set folder to write")
-    parser.add_argument("--truth", required=True, type=Path, help="truth YAML (keep it outside --out)")
+    parser.add_argument("--truth", required=True, type=Path, help="truth YAML (with --map: CSV); keep it outside --out")
     parser.add_argument("--effect", action="append", default=[], help="TERM:PARAM=VALUE, repeatable")
     parser.add_argument(
         "--hold",
@@ -104,7 +111,19 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--baseline-offset", type=float, default=0.0, help="std of each curve's force offset [N]")
     parser.add_argument("--tilt", type=float, default=0.0, help="baseline slope dF/dz [N/m]")
     parser.add_argument("--seed", type=int, default=defaults.seed)
-    args = parser.parse_args(argv)
+    parser.add_argument("--map", type=int, nargs=2, metavar=("NX", "NY"), help="write a force map of NX × NY spots")
+    parser.add_argument("--spacing", type=float, default=5e-6, help="--map: distance between spots [m]")
+    parser.add_argument("--variation", type=float, default=0.4, help="--map: relative change of K and E* over it")
+    parser.add_argument(
+        "--region-effect", action="append", default=[], help="--map: TERM:PARAM=VALUE inside the disc, repeatable"
+    )
+    parser.add_argument("--region-radius", type=float, help="--map: the disc's radius [m] (default 0.3 × the map)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> None:
+    defaults = Experiment()
+    args = _parser(defaults).parse_args(argv)
     if args.truth.resolve().is_relative_to(args.out.resolve()):
         raise SystemExit(f"--truth {args.truth}: keep the truth outside the recording folder {args.out}")
     try:
@@ -133,6 +152,20 @@ def main(argv: list[str] | None = None) -> None:
         )
     except ValueError as error:
         raise SystemExit(str(error)) from None
+    if args.map:
+        try:
+            layout = MapLayout(
+                *args.map,
+                args.spacing,
+                args.variation,
+                parse_effects(args.region_effect, "--region-effect"),
+                region_radius=args.region_radius,
+            )
+        except ValueError as error:
+            raise SystemExit(str(error)) from None
+        table = write_map(args.out, args.truth, experiment, layout)
+        print(f"wrote {args.out} ({len(table)} spots, {int(table['in_region'].sum())} in the region) and {args.truth}")
+        return
     meta, curves = simulate(experiment)
     write_recordings(args.out, meta, curves)
     truth = {"format": "ptwin-truth/1", "recordings": str(args.out), **asdict(experiment)}

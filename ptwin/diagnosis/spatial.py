@@ -1,0 +1,131 @@
+"""What the spots of a force map say together: each spot's verdict, the grid the spots lie on, and
+whether a named term holds over a connected region (evidence from several neighbouring spots) or only
+at scattered spots (each as weak as one set's verdict). A spot counts towards a term's regions when it
+names the term with moderate or strong confidence; weak namings (the base model explains that spot as
+well) are counted apart."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy import ndimage
+
+from ptwin.diagnosis.words import finite_or_none
+
+MIN_REGION = 3  # neighbouring spots (sharing an edge of the grid) that make a region
+FAILED, NOTHING, UNEXPLAINED = "not diagnosed", "nothing named", "unexplained"
+
+
+def verdict(row) -> str:
+    """A spot's verdict in a few words: what was named (with its confidence), or why nothing was."""
+    if row["status"] != "ok":
+        return FAILED
+    if row["unexplained"]:
+        return UNEXPLAINED
+    if not row["left_out"]:
+        return NOTHING
+    terms, grades = row["left_out"].split(";"), row["confidence"].split(";")
+    return " + ".join(f"{t} ({g})" for t, g in zip(terms, grades))
+
+
+def grid(table: pd.DataFrame) -> tuple[np.ndarray, np.ndarray] | None:
+    """Each spot's (column, row) index on the map's grid, from its position (ranks of the distinct x and y,
+    to the nanometre); None when a spot has no position."""
+    if table[["x", "y"]].isna().to_numpy().any():
+        return None
+    column = np.unique(np.round(table["x"].to_numpy() * 1e9), return_inverse=True)[1]
+    row = np.unique(np.round(table["y"].to_numpy() * 1e9), return_inverse=True)[1]
+    return column, row
+
+
+def regions(named: np.ndarray, column: np.ndarray, row: np.ndarray) -> list[np.ndarray]:
+    """The spots (indices into ``named``) of each connected group of spots where ``named`` holds, largest first."""
+    image = np.zeros((row.max() + 1, column.max() + 1), dtype=bool)
+    image[row[named], column[named]] = True
+    labels, _ = ndimage.label(image)  # edge neighbours
+    spot_labels = labels[row, column] * named
+    groups = [np.flatnonzero(spot_labels == label) for label in np.unique(spot_labels[spot_labels > 0])]
+    return sorted(groups, key=len, reverse=True)
+
+
+def summarise_map(table: pd.DataFrame) -> dict:
+    """``map_summary.json``: the spots' verdicts counted, K and E* over the diagnosed spots (median and the
+    spread between the 16th and 84th percentiles), and for each named term where it holds."""
+    ok = table[table["status"] == "ok"]
+    verdicts = table.apply(verdict, axis=1)
+    summary = {
+        "spots": len(table),
+        "diagnosed": len(ok),
+        "verdicts": verdicts.value_counts().to_dict(),
+        "permeability": _spread(ok["permeability"]),
+        "effective_modulus": _spread(ok["effective_modulus"]),
+        "terms": {},
+        "sentences": [],
+    }
+    if len(ok) < len(table):
+        summary["sentences"].append(
+            f"{len(table) - len(ok)} of {len(table)} spots could not be diagnosed; spots.csv gives each one's reason."
+        )
+    place = grid(table)
+    terms = sorted({t for names in ok["left_out"] for t in names.split(";") if t})  # named at any confidence
+    for term in terms:
+        grades = table.apply(lambda row, t=term: _grade(row, t), axis=1)
+        named = grades.isin(["moderate", "strong"]).to_numpy()
+        entry = {"spots": int(named.sum()), "weak_spots": int((grades == "weak").sum())}
+        if place is None:
+            entry["sentence"] = (
+                f"{term} is named with moderate or strong confidence at {entry['spots']} of {len(ok)} diagnosed "
+                f"spots (weak at {entry['weak_spots']} more); the spots have no positions, so whether they form a "
+                "region is not known."
+            )
+        else:
+            groups = regions(named, *place)
+            inside = [g for g in groups if len(g) >= MIN_REGION]
+            entry["regions"] = [_extent(table.iloc[g]) for g in inside]
+            entry["scattered"] = int(named.sum()) - sum(len(g) for g in inside)
+            entry["sentence"] = _region_sentence(term, entry, len(ok))
+        summary["terms"][term] = entry
+        summary["sentences"].append(entry["sentence"])
+    return finite_or_none(summary)
+
+
+def _grade(row, term: str) -> str | None:
+    """The confidence with which a diagnosed spot names ``term`` (None: not named there)."""
+    if row["status"] != "ok" or not row["left_out"]:
+        return None
+    grades = dict(zip(row["left_out"].split(";"), row["confidence"].split(";")))
+    return grades.get(term)
+
+
+def _spread(values: pd.Series) -> dict:
+    values = values.dropna()
+    if values.empty:
+        return {"median": None, "p16": None, "p84": None}
+    return {"median": float(values.median()), "p16": float(values.quantile(0.16)), "p84": float(values.quantile(0.84))}
+
+
+def _extent(spots: pd.DataFrame) -> dict:
+    return {
+        "spots": len(spots),
+        "x": [float(spots["x"].min()), float(spots["x"].max())],
+        "y": [float(spots["y"].min()), float(spots["y"].max())],
+    }
+
+
+def _region_sentence(term: str, entry: dict, diagnosed: int) -> str:
+    sentence = f"{term} is named with moderate or strong confidence at {entry['spots']} of {diagnosed} diagnosed spots"
+    if entry["regions"]:
+        described = ", ".join(
+            f"{r['spots']} spots over x {r['x'][0] * 1e6:.3g}–{r['x'][1] * 1e6:.3g} µm, "
+            f"y {r['y'][0] * 1e6:.3g}–{r['y'][1] * 1e6:.3g} µm"
+            for r in entry["regions"]
+        )
+        sentence += f": in {len(entry['regions'])} connected region(s) ({described})"
+    if entry["scattered"]:
+        sentence += (
+            f"{';' if entry['regions'] else ':'} {entry['scattered']} at scattered spots (fewer than {MIN_REGION} "
+            "neighbours together), weaker evidence than a region"
+        )
+    if entry["weak_spots"]:
+        sentence += f"; with weak confidence at {entry['weak_spots']} more spots, which no region counts"
+    return sentence + "."

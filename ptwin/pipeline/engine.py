@@ -1,0 +1,59 @@
+"""Where the spots of a map run: in this process (``serial``), on a Dask ``LocalCluster`` (``local``: one
+single-threaded worker process per core), or on any running Dask scheduler given by its address (a
+cluster started by dask-jobqueue on SLURM/PBS, or on Kubernetes), without a change of code.
+
+Results come back to this process, which writes them: the workers need no shared disk. Each task runs
+torch on one thread (the workers are the parallelism) and finds the PGD basis in its process's memory
+after its first spot (``ptwin.pgd.cache``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterator, Sequence
+from functools import partial
+
+import torch
+
+SERIAL, LOCAL = "serial", "local"
+
+
+def _single_threaded(function: Callable, item):
+    torch.set_num_threads(1)
+    return function(item)
+
+
+def run_each(
+    function: Callable, items: Sequence, scheduler: str = LOCAL, workers: int = 0, failed: Callable | None = None
+) -> Iterator[tuple[object, object]]:
+    """(item, function(item)) for every item, as each completes. ``failed(item, error)`` gives the result of
+    an item whose task was lost (a worker killed, say); without it the error is raised."""
+    if scheduler == SERIAL:
+        for item in items:
+            yield item, _single_threaded(function, item)
+        return
+    from distributed import Client, LocalCluster, as_completed  # only maps import Dask
+
+    if scheduler == LOCAL:
+        cluster = LocalCluster(
+            n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True, dashboard_address=None
+        )
+        client = Client(cluster)
+    else:
+        cluster, client = None, Client(scheduler)
+    try:
+        task = partial(_single_threaded, function)
+        futures = client.map(task, list(items), pure=False)
+        item_of = {future.key: item for future, item in zip(futures, items)}
+        for future in as_completed(futures):
+            item = item_of[future.key]
+            try:
+                yield item, future.result()
+            except Exception as error:
+                if failed is None:
+                    raise
+                yield item, failed(item, error)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
