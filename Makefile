@@ -20,6 +20,7 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m bench.train_bench
+	$(PY) -m bench.map_bench
 	$(PY) bench/pgd_bench.py
 
 discover-bench: $(STAMP)

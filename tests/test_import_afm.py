@@ -49,3 +49,55 @@ def test_files_of_different_cantilevers_are_refused(tmp_path, capsys):
         capsys.readouterr().err.strip(),
     )
     assert not (tmp_path / "set").exists()
+
+
+class MapCurve:
+    """A curve of a force map as afmformats gives it: the real curve's data under a spot's grid metadata."""
+
+    def __init__(self, curve, column: int, row: int, speed: float):
+        self.curve, self.columns = curve, curve.columns
+        self.metadata = {key: curve.metadata[key] for key in curve.metadata}
+        grid = {"grid index x": column, "grid index y": row, "position x": 2e-6 * column, "position y": 2e-6 * row}
+        self.metadata.update(grid, **{"speed approach": speed})
+
+    def __getitem__(self, column):
+        return self.curve[column]
+
+
+def test_force_map_files_become_one_recording_set_per_spot(tmp_path, monkeypatch, capsys):
+    """Two map files (speeds) of 2×2 spots become four spots with two speeds each and their positions; a
+    curve afmformats cannot import (no baseline) leaves its spot with the other speed, and says so."""
+    import afmformats
+
+    real = afmformats.load_data(AFM / "fmt-jpk-fd_spot3-0192.jpk-force")[0]
+
+    def load_data(path, meta_override=None):
+        speed = 5e-6 if "slow" in str(path) else 1.5e-5
+        curves = [MapCurve(real, column, row, speed) for row in range(2) for column in range(2)]
+        if speed > 5e-6:
+            curves[3] = Truncated(curves[3])
+        return curves
+
+    monkeypatch.setattr(afmformats, "load_data", load_data)
+    main(["slow.jpk-force-map", "fast.jpk-force-map", "--map", "--out", str(tmp_path / "map"), *COMMON])
+    spots = sorted(p.name for p in (tmp_path / "map").iterdir())
+    assert spots == ["spot_000_000", "spot_000_001", "spot_001_000", "spot_001_001"]
+    spot = load_recordings(tmp_path / "map" / "spot_001_000")
+    assert spot.meta.position == pytest.approx((0.0, 2e-6))
+    assert sorted(spot.curve_ids) == ["v15", "v5"]
+    assert load_recordings(tmp_path / "map" / "spot_001_001").curve_ids == ["v5"]
+    assert re.search(
+        r"not imported: fast.jpk-force-map \(spot 1, 1\): no baseline before contact", capsys.readouterr().err
+    )
+
+
+class Truncated(MapCurve):
+    """The curve from the contact on: no baseline before it."""
+
+    def __init__(self, curve: MapCurve):
+        self.curve, self.columns, self.metadata = curve.curve, curve.columns, curve.metadata
+        force = np.asarray(curve.curve["force"])
+        self.start = int(np.argmax(force > force.min() + 0.5 * np.ptp(force)))
+
+    def __getitem__(self, column):
+        return np.asarray(self.curve[column])[self.start :]

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import torch
 
+BLOCK_WORK = 1000  # block × modes of ``hereditary_inverse``: one exponential's law in a block or two
+
 
 def linear_recurrence(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """x with x_i = a_i x_{i−1} + b_i and x_{−1} = 0 along the last dimension (set a_i = 0 to restart
@@ -70,15 +72,17 @@ def hereditary_inverse(
     weights: torch.Tensor,
     times: torch.Tensor,
     time: torch.Tensor,
-    block: int = 25,
+    block: int | None = None,
 ) -> torch.Tensor:
     """F on one curve's samples with F + extra·(F − F₀) + Σ_m weights_m·q_m = target, q_m the relaxation
     integral of F with τ_m = ``times`` (M,) (exact for F linear between samples, as ``relaxation_integral``).
 
     The operator is causal with a positive diagonal, so it is solved exactly by block forward substitution:
-    ``block`` samples at a time, a dense lower-triangular system in the increments of F, the modes carried
-    from block to block — where a fixed point F ← target − Σ(…) diverges once the memory outweighs F
-    (g > 1, or a power law's weight on the last step)."""
+    ``block`` samples at a time (default: ``BLOCK_WORK`` / modes, at least 25), a dense lower-triangular
+    system in the increments of F, the modes carried from block to block — where a fixed point
+    F ← target − Σ(…) diverges once the memory outweighs F (g > 1, or a power law's weight on the last step)."""
+    if block is None:  # a block's work grows as block² × modes and the loop's cost as samples / block
+        block = max(BLOCK_WORK // max(times.numel(), 1), 25)
     first = target[0]
     values, modes = [first[None]], torch.zeros_like(times)
     for begin in range(1, time.numel(), block):

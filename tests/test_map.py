@@ -1,0 +1,149 @@
+"""Force maps: a generated 4×4 map (K and E* varying over it, pore-pressure relaxation concealed in a disc)
+gives K per spot and the term's region; a broken spot is a row, not a stop; Dask and serial runs agree;
+a killed map resumes; and the map's geometry (positions, regions) is read right."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+from hydra import compose, initialize_config_dir
+
+from ptwin.app import register, typed
+from ptwin.data.recordings import RecordingError, load_recordings
+from ptwin.diagnosis.spatial import regions
+from ptwin.pipeline.forcemap import run_map
+from ptwin.synth.cli import main as synth
+from tests.conftest import CONFIGS
+
+pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+SPEEDS = ("2e-6", "8e-6", "40e-6")
+
+
+def map_settings(folder, cache, *overrides):
+    """The settings ``python -m ptwin.map`` composes, on the coarse basis."""
+    register()
+    with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
+        cfg = compose("map", [f"data.path={folder}", "pgd=coarse", f"cache_dir={cache}", *overrides])
+    return typed(cfg)
+
+
+@pytest.fixture(scope="module")
+def generated_map(tmp_path_factory):
+    """A 4×4 map (3 speeds × 400 samples per spot, pore-pressure relaxation inside the central disc) and one
+    more spot whose curves.csv is broken."""
+    root = tmp_path_factory.mktemp("map")
+    folder, truth = root / "map", root / "truth.csv"
+    synth(
+        ["--map", "4", "4", "--out", str(folder), "--truth", str(truth), "--speeds", *SPEEDS, "--samples", "400"]
+        + ["--region-effect", "pore_pressure_relaxation:M=3e4", "--seed", "7"]
+    )
+    broken = folder / "spot_zz_broken"
+    broken.mkdir()
+    (broken / "meta.yaml").write_text((folder / "spot_000_000" / "meta.yaml").read_text())
+    lines = (folder / "spot_000_000" / "curves.csv").read_text().splitlines()
+    lines[5] = lines[5].replace(lines[5].split(",")[3], "not-a-number")
+    (broken / "curves.csv").write_text("\n".join(lines) + "\n")
+    return folder, pd.read_csv(truth)
+
+
+@pytest.fixture(scope="module")
+def serial_map(generated_map, coarse_cache, tmp_path_factory):
+    folder, truth = generated_map
+    output = tmp_path_factory.mktemp("serial")
+    result = run_map(map_settings(folder, coarse_cache, "map.scheduler=serial"), output, progress=lambda _: None)
+    return result, output
+
+
+def test_synthetic_map_has_positions_and_its_truth_beside_it(generated_map):
+    folder, truth = generated_map
+    assert len(truth) == 16 and truth["in_region"].sum() == 4
+    spot = truth.iloc[6]
+    assert load_recordings(folder / spot["spot"]).meta.position == pytest.approx((spot["x"], spot["y"]))
+    assert truth["permeability"].max() / truth["permeability"].min() == pytest.approx(np.exp(0.4), rel=1e-6)
+
+
+def test_map_recovers_k_per_spot_and_the_region_of_the_concealed_term(serial_map, generated_map):
+    result, output = serial_map
+    table = result.table.merge(generated_map[1], on="spot", suffixes=("", "_true"))
+    assert (table["status"] == "ok").all()
+    assert table["permeability"].to_numpy() == pytest.approx(table["permeability_true"].to_numpy(), rel=0.05)
+    named = table["confidence"].fillna("").str.contains("strong|moderate") & table["left_out"].str.contains(
+        "pore_pressure_relaxation"
+    )
+    assert (named == table["in_region"]).mean() >= 0.9
+    assert result.summary["terms"]["pore_pressure_relaxation"]["regions"][0]["spots"] >= 3
+    for name in ("spots.csv", "map_summary.json", "report.md", "map_permeability.png", "map_verdict.png"):
+        assert (output / name).is_file()
+
+
+def test_a_broken_spot_is_a_row_with_its_reason_and_the_rest_completes(serial_map):
+    result, output = serial_map
+    table = pd.read_csv(output / "spots.csv")
+    assert len(table) == 17
+    broken = table.set_index("spot").loc["spot_zz_broken"]
+    assert "curves.csv" in broken["status"] and "not-a-number" in broken["status"]
+    assert "\n" not in broken["status"] and np.isnan(broken["permeability"])
+    assert json.loads((output / "map_summary.json").read_text())["diagnosed"] == 16
+
+
+def test_a_killed_map_resumes_from_the_spots_already_written(serial_map, generated_map, coarse_cache):
+    result, output = serial_map
+    for name in ("spot_001_001", "spot_003_002"):
+        (output / "spots" / f"{name}.json").unlink()  # as if the run had been killed before them
+    kept = (output / "spots" / "spot_000_000.json").stat().st_mtime_ns
+    lines = []
+    settings = map_settings(generated_map[0], coarse_cache, "map.scheduler=serial")
+    resumed = run_map(settings, output, progress=lines.append)
+    assert any("15 already diagnosed" in line and "2 to run" in line for line in lines)
+    assert (output / "spots" / "spot_000_000.json").stat().st_mtime_ns == kept
+    columns = [c for c in resumed.table.columns if c != "seconds"]
+    pd.testing.assert_frame_equal(resumed.table[columns], result.table[columns])
+
+
+def test_dask_with_two_workers_gives_the_serial_table(serial_map, generated_map, coarse_cache, tmp_path):
+    """On five of the spots (the broken one among them): each worker runs several, in any order."""
+    result, _ = serial_map
+    picked = ["spot_000_000", "spot_001_001", "spot_002_002", "spot_003_001", "spot_zz_broken"]
+    for spot in picked:
+        (tmp_path / "map" / spot).parent.mkdir(exist_ok=True)
+        (tmp_path / "map" / spot).symlink_to(generated_map[0] / spot)
+    settings = map_settings(tmp_path / "map", coarse_cache, "map.scheduler=local", "map.workers=2")
+    dask = run_map(settings, tmp_path / "out", progress=lambda _: None).table
+    dask["status"] = dask["status"].str.replace(str(tmp_path / "map"), str(generated_map[0]))  # the same files
+    serial = result.table.set_index("spot").loc[picked].reset_index()
+    columns = [c for c in dask.columns if c != "seconds"]  # wall time is the one thing that may differ
+    pd.testing.assert_frame_equal(dask[columns], serial[columns])
+
+
+def test_regions_are_edge_connected_groups_largest_first():
+    #   y=2  . x x
+    #   y=1  x . x
+    #   y=0  x . .
+    column = np.array([0, 1, 2, 0, 1, 2, 0, 1, 2])
+    row = np.array([0, 0, 0, 1, 1, 1, 2, 2, 2])
+    named = np.array([1, 0, 0, 1, 0, 1, 0, 1, 1], dtype=bool)
+    groups = regions(named, column, row)
+    assert [sorted(g.tolist()) for g in groups] == [[5, 7, 8], [0, 3]]
+
+
+def test_a_position_that_is_not_two_numbers_in_metres_is_refused_with_its_file(tmp_path, generated_map):
+    folder = generated_map[0]
+    spot = tmp_path / "spot"
+    spot.mkdir()
+    (spot / "curves.csv").write_text((folder / "spot_000_000" / "curves.csv").read_text())
+    meta = (folder / "spot_000_000" / "meta.yaml").read_text()
+    (spot / "meta.yaml").write_text(meta.split("position:")[0] + "position: [5, 0]\n")
+    with pytest.raises(RecordingError, match=r"meta.yaml: position \[5, 0\] is not a place on a sample in metres"):
+        load_recordings(spot)
+
+
+def test_map_command_says_in_one_line_what_is_wrong_with_its_folder(tmp_path):
+    command = [sys.executable, "-m", "ptwin.map", f"data.path={tmp_path / 'nowhere'}", f"hydra.run.dir={tmp_path}"]
+    finished = subprocess.run(command, capture_output=True, text=True, cwd=CONFIGS.parent)
+    assert finished.returncode == 2
+    assert finished.stderr.strip().splitlines() == [
+        f"{tmp_path / 'nowhere'}: no such force-map folder; give data.path=<folder of recording-set folders>"
+    ]
