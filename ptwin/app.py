@@ -2,7 +2,8 @@
 registered as the configs' schema, their conversion to dataclasses, and one line on
 stderr for anything that ends a run: exit code 2 for what a user can fix (bad
 recordings, a set that cannot support a diagnosis, a damaged or foreign checkpoint, an
-impossible setting), 3 for anything else, its traceback kept in the run directory."""
+impossible setting, a Dask scheduler that does not answer), 3 for anything else, its
+traceback kept in the run directory."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 from ptwin.data.recordings import RecordingError
 from ptwin.files import StoredFileError
 from ptwin.pgd.config import PGDConfig
+from ptwin.pipeline.engine import EngineError
 from ptwin.pipeline.settings import MapRunSettings, Settings
 
 
@@ -57,7 +59,7 @@ def one_line_errors(output_dir: Path) -> Iterator[None]:
     line naming it and ``output_dir/error.log`` (the traceback, to report) and exit code 3."""
     try:
         yield
-    except (RecordingError, StoredFileError, SettingsError) as error:
+    except (RecordingError, StoredFileError, SettingsError, EngineError) as error:
         print(error, file=sys.stderr)
         raise SystemExit(2) from None
     except Exception as error:

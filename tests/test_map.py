@@ -147,3 +147,12 @@ def test_map_command_says_in_one_line_what_is_wrong_with_its_folder(tmp_path):
     assert finished.stderr.strip().splitlines() == [
         f"{tmp_path / 'nowhere'}: no such force-map folder; give data.path=<folder of recording-set folders>"
     ]
+
+
+def test_a_scheduler_that_does_not_answer_is_one_line_naming_the_setting(generated_map, coarse_cache, monkeypatch):
+    import ptwin.pipeline.engine as engine
+
+    monkeypatch.setattr(engine, "CONNECT_SECONDS", 1)
+    settings = map_settings(generated_map[0], coarse_cache, "map.scheduler=tcp://127.0.0.1:9")
+    with pytest.raises(engine.EngineError, match=r"^map.scheduler=tcp://127.0.0.1:9: no Dask scheduler answers there"):
+        run_map(settings, generated_map[0].parent / "unreachable", progress=lambda _: None)

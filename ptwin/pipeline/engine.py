@@ -16,6 +16,11 @@ from functools import partial
 import torch
 
 SERIAL, LOCAL = "serial", "local"
+CONNECT_SECONDS = 10
+
+
+class EngineError(ValueError):
+    """An engine that cannot be reached or started; the message names the setting and the fix."""
 
 
 def _single_threaded(function: Callable, item):
@@ -40,7 +45,13 @@ def run_each(
         )
         client = Client(cluster)
     else:
-        cluster, client = None, Client(scheduler)
+        try:
+            cluster, client = None, Client(scheduler, timeout=CONNECT_SECONDS)
+        except (OSError, ValueError, TypeError) as error:
+            raise EngineError(
+                f"map.scheduler={scheduler}: no Dask scheduler answers there ({str(error).splitlines()[0]}); start "
+                f"one (dask scheduler, dask-jobqueue) and give its address, or use map.scheduler=local"
+            ) from None
     try:
         task = partial(_single_threaded, function)
         futures = client.map(task, list(items), pure=False)
