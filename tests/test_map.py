@@ -156,3 +156,23 @@ def test_a_scheduler_that_does_not_answer_is_one_line_naming_the_setting(generat
     settings = map_settings(generated_map[0], coarse_cache, "map.scheduler=tcp://127.0.0.1:9")
     with pytest.raises(engine.EngineError, match=r"^map.scheduler=tcp://127.0.0.1:9: no Dask scheduler answers there"):
         run_map(settings, generated_map[0].parent / "unreachable", progress=lambda _: None)
+
+
+def test_anything_unforeseen_at_a_spot_is_its_row_and_its_traceback_comes_back(
+    generated_map, coarse_cache, tmp_path, monkeypatch
+):
+    import ptwin.pipeline.spot as spot
+
+    def prepare(settings, progress):
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setattr(spot, "prepare", prepare)
+    (tmp_path / "map").mkdir()
+    (tmp_path / "map" / "only").symlink_to(generated_map[0] / "spot_000_000")
+    settings = map_settings(tmp_path / "map", coarse_cache, "map.scheduler=serial")
+    result = run_map(settings, tmp_path / "out", progress=lambda _: None)
+    status = result.table.loc[0, "status"]
+    assert status == "unexpected ZeroDivisionError (a bug); see spots/only.json: please report it"
+    stored = json.loads((tmp_path / "out" / "spots" / "only.json").read_text())
+    assert "ZeroDivisionError: a bug" in stored["traceback"]
+    assert (tmp_path / "out" / "report.md").read_text().count("unexpected ZeroDivisionError") == 1

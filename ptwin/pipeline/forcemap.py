@@ -18,7 +18,7 @@ from ptwin.data.recordings import RecordingError
 from ptwin.diagnosis.spatial import summarise_map
 from ptwin.pipeline.engine import run_each
 from ptwin.pipeline.settings import MapRunSettings, Settings
-from ptwin.pipeline.spot import COLUMNS, Spot, blank_row, diagnose_spot, position_of
+from ptwin.pipeline.spot import COLUMNS, RESULTS, Spot, blank_row, diagnose_spot, position_of, result_path
 from ptwin.reporting.maps import write_map_outputs
 
 FORMAT = "ptwin-spot/1"
@@ -46,19 +46,19 @@ def run_map(settings: MapRunSettings, output_dir: Path, progress: Callable[[str]
     """Diagnose every spot of the map ``settings.data.path`` (those already in ``output_dir`` from a run
     with the same settings are kept) and write the map's outputs into ``output_dir``."""
     spots = find_spots(Path(settings.data.path))
-    results_dir = output_dir / "spots"
+    results_dir = output_dir / RESULTS
     results_dir.mkdir(parents=True, exist_ok=True)
     spot_settings = _spot_settings(settings)
     fingerprint = _fingerprint(spot_settings, settings.map.hybrid)
-    done = {spot.name: row for spot in spots if (row := _stored_row(results_dir / f"{spot.name}.json", fingerprint))}
+    done = {spot.name: row for spot in spots if (row := _stored_row(output_dir / result_path(spot), fingerprint))}
     todo = [spot for spot in spots if spot.name not in done]
     m = settings.map
     engine = "serial" if m.scheduler == "serial" else f"Dask ({m.scheduler})"
     progress(f"{len(spots)} spots, {len(done)} already diagnosed in {results_dir}; {len(todo)} to run on {engine}")
     task = partial(_spot_task, settings=spot_settings, hybrid=m.hybrid, results_dir=results_dir)
     with tqdm(total=len(spots), initial=len(done), unit="spot", desc="spots") as bar:
-        for spot, result in run_each(task, todo, m.scheduler, m.workers, partial(_lost, results_dir=results_dir)):
-            _store(results_dir / f"{spot.name}.json", {"format": FORMAT, "settings": fingerprint, **result})
+        for spot, result in run_each(task, todo, m.scheduler, m.workers, _lost):
+            _store(output_dir / result_path(spot), {"format": FORMAT, "settings": fingerprint, **result})
             done[spot.name] = result["row"]
             bar.update()
     table = pd.DataFrame([done[spot.name] for spot in spots], columns=list(COLUMNS))
@@ -79,7 +79,7 @@ def _spot_task(spot: Spot, settings: Settings, hybrid: bool, results_dir: Path) 
     return diagnose_spot(spot, settings, hybrid, results_dir / spot.name)
 
 
-def _lost(spot: Spot, error: Exception, results_dir: Path) -> dict:
+def _lost(spot: Spot, error: Exception) -> dict:
     """The result of a spot whose task never came back (its worker died): a row that says so."""
     first = str(error).splitlines()[0] if str(error) else type(error).__name__
     row = blank_row(spot)

@@ -26,6 +26,7 @@ from ptwin.pipeline.settings import Settings
 from ptwin.pipeline.twin import train_twin
 
 OK = "ok"
+RESULTS = "spots"  # the folder of a map's output where each spot's result lands
 COLUMNS = (
     "spot",
     "x",
@@ -64,6 +65,11 @@ def position_of(folder: Path) -> tuple[float, float] | None:
     return x, y
 
 
+def result_path(spot: Spot) -> Path:
+    """Where a spot's result lands, relative to the map's output folder."""
+    return Path(RESULTS) / f"{spot.name}.json"
+
+
 def blank_row(spot: Spot) -> dict:
     """The row of a spot before (or without) its diagnosis: its name and place, nothing named."""
     row = {column: None for column in COLUMNS}
@@ -73,26 +79,26 @@ def blank_row(spot: Spot) -> dict:
 
 
 def diagnose_spot(spot: Spot, settings: Settings, hybrid: bool, output_dir: Path) -> dict:
-    """{"row": the spot's row of ``spots.csv``, "diagnosis": its diagnosis.json or None}; never raises for
-    what is wrong with the spot's data: the row's status says it. ``output_dir``: the spot's own folder
-    (the hybrid twin's checkpoints)."""
+    """{"row": the spot's row of ``spots.csv``, "diagnosis": its diagnosis.json or None, and "traceback" of
+    anything unforeseen}; never raises for what is wrong with the spot: the row's status says it.
+    ``output_dir``: the spot's own folder (the hybrid twin's checkpoints)."""
     started = time.perf_counter()
     torch.manual_seed(settings.seed)  # each spot alike, whichever worker and order runs it
     row = blank_row(spot)
-    diagnosis = None
+    result = {"row": row, "diagnosis": None}
     try:
         diagnosis = _diagnosis(replace(settings, data=replace(settings.data, path=str(spot.path))), hybrid, output_dir)
     except (RecordingError, StoredFileError, FitError) as error:
         row["status"] = str(error).splitlines()[0]
-    except Exception as error:  # a spot never stops the map: the line names it, the traceback is kept
-        output_dir.mkdir(parents=True, exist_ok=True)
-        (output_dir / "error.log").write_text(traceback.format_exc())
+    except Exception as error:  # a spot never stops the map: the line names it, the traceback comes back with it
         first = str(error).splitlines()[0] if str(error) else ""
-        row["status"] = f"unexpected {type(error).__name__} ({first}); traceback in {output_dir / 'error.log'}"
+        row["status"] = f"unexpected {type(error).__name__} ({first}); see {result_path(spot)}: please report it"
+        result["traceback"] = traceback.format_exc()
     else:
         row.update(_row(diagnosis), status=OK)
+        result["diagnosis"] = diagnosis.to_json()
     row["seconds"] = time.perf_counter() - started
-    return finite_or_none({"row": row, "diagnosis": None if diagnosis is None else diagnosis.to_json()})
+    return finite_or_none(result)
 
 
 def _diagnosis(settings: Settings, hybrid: bool, output_dir: Path) -> Diagnosis:
