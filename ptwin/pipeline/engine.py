@@ -9,6 +9,7 @@ after its first spot (``ptwin.pgd.cache``).
 
 from __future__ import annotations
 
+import ctypes
 import os
 from collections.abc import Callable, Iterator, Sequence
 from functools import partial
@@ -17,6 +18,7 @@ import torch
 
 SERIAL, LOCAL = "serial", "local"
 CONNECT_SECONDS = 10
+M_MMAP_THRESHOLD = -3  # glibc's mallopt parameter (malloc.h)
 
 
 class EngineError(ValueError):
@@ -25,7 +27,19 @@ class EngineError(ValueError):
 
 def _single_threaded(function: Callable, item):
     torch.set_num_threads(1)
+    _heap_for_tensors()
     return function(item)
+
+
+def _heap_for_tensors() -> None:
+    """Keep glibc's allocator from mapping every tensor over 128 KiB anew. Dask's nannies start workers with
+    MALLOC_TRIM_THRESHOLD_ set, which also freezes the mmap threshold at 128 KiB: each such tensor is then
+    mmapped, unmapped and page-faulted again, a third of a spot's time in the kernel. Elsewhere: nothing."""
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+    except OSError:  # not glibc
+        return
+    libc.mallopt(M_MMAP_THRESHOLD, 32 * 2**20)  # glibc's largest
 
 
 def run_each(
