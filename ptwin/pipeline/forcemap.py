@@ -35,7 +35,10 @@ def find_spots(folder: Path) -> list[Spot]:
     if not folder.is_dir():
         raise RecordingError(f"{folder}: no such force-map folder; give data.path=<folder of recording-set folders>")
     if (folder / "curves.csv").exists():
-        raise RecordingError(f"{folder}: a single recording set, not a map; run python train.py data.path={folder}")
+        raise RecordingError(
+            f"{folder}: a single recording set, not a force map; give data.path=<folder of spot folders> "
+            f"(python train.py data.path={folder} diagnoses this set)"
+        )
     spots = [Spot(p.name, p, position_of(p)) for p in sorted(folder.iterdir()) if p.is_dir() and p.name[0] != "."]
     if not spots:
         raise RecordingError(f"{folder}: no spot folders; a force map holds one recording-set folder per spot")
