@@ -22,11 +22,6 @@ from ptwin.physics.model import PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
-# A fit has converged when a step lowers χ² by less than this: the parameters are then within a few
-# hundredths of their standard deviation of the optimum (Δχ² = 1 is one standard deviation), far below
-# anything a BIC margin, an interval or a grade can see; further steps only cost Jacobians.
-CONVERGED = 2e-3
-
 
 @dataclass
 class PhysicsFit:
@@ -88,16 +83,16 @@ def rmse(model: ForceModel, samples: Samples, index: torch.Tensor) -> float:
 
 
 def fit_physics(
-    model: ForceModel, samples: Samples, index: torch.Tensor, iterations: int = 60, tolerance: float = CONVERGED
+    model: ForceModel, samples: Samples, index: torch.Tensor, iterations: int = 60, tolerance: float = 1e-10
 ) -> PhysicsFit:
     """Fit the free parameters of ``model`` (K and its terms; frozen ones stay) to ``samples[index]`` by LM,
-    until a step lowers χ² (under the noise model) by less than ``tolerance``.
+    until a step lowers the cost by less than ``tolerance`` (relative).
 
     Raises ``FitError`` (the reason in words) when the model cannot be evaluated or linearised.
     """
     vector, residual = scaled_residual(model, samples, index)
     solver = LevenbergMarquardt(residual, vector.get())
-    theta = solver.run(iterations, tolerance=0.0, absolute=tolerance / 2)  # the cost is ½χ²
+    theta = solver.run(iterations, tolerance)
     vector.set(theta)
     jacobian, r = solver.checked_linearise(theta)
     cov = covariance(jacobian, r) * samples.noise_inflation
