@@ -34,7 +34,7 @@ def _single_threaded(function: Callable, item):
 def _heap_for_tensors() -> None:
     """Keep glibc's allocator from mapping every tensor over 128 KiB anew. Dask's nannies start workers with
     MALLOC_TRIM_THRESHOLD_ set, which also freezes the mmap threshold at 128 KiB: each such tensor is then
-    mmapped, unmapped and page-faulted again, a third of a spot's time in the kernel. Elsewhere: nothing."""
+    mmapped, unmapped and page-faulted again, a third of a spot's time in the kernel. Without glibc: nothing."""
     try:
         libc = ctypes.CDLL("libc.so.6")
     except OSError:  # not glibc
