@@ -1,8 +1,8 @@
 """What the spots of a force map say together: each spot's verdict, the grid the spots lie on, and
 whether a named term holds over a connected region (evidence from several neighbouring spots) or only
 at scattered spots (each as weak as one set's verdict). A spot counts towards a term's regions when it
-names the term with moderate or strong confidence; weak namings (the base model explains that spot as
-well) are counted apart."""
+names the term with moderate or strong confidence; weak namings (the data there cannot tell it from an
+alternative) are counted apart."""
 
 from __future__ import annotations
 
@@ -24,8 +24,14 @@ def verdict(row) -> str:
         return UNEXPLAINED
     if not row["left_out"]:
         return NOTHING
-    terms, grades = row["left_out"].split(";"), row["confidence"].split(";")
-    return " + ".join(f"{t} ({g})" for t, g in zip(terms, grades))
+    return " + ".join(f"{term} ({grade})" for term, grade in named_terms(row).items())
+
+
+def named_terms(row) -> dict[str, str]:
+    """{term: confidence} of what a diagnosed spot names (empty for any other spot)."""
+    if row["status"] != "ok" or not row["left_out"]:
+        return {}
+    return dict(zip(row["left_out"].split(";"), row["confidence"].split(";")))
 
 
 def grid(table: pd.DataFrame) -> tuple[np.ndarray, np.ndarray] | None:
@@ -69,7 +75,7 @@ def summarise_map(table: pd.DataFrame) -> dict:
     place = grid(table)
     terms = sorted({t for names in ok["left_out"] for t in names.split(";") if t})  # named at any confidence
     for term in terms:
-        grades = table.apply(lambda row, t=term: _grade(row, t), axis=1)
+        grades = table.apply(lambda row, t=term: named_terms(row).get(t), axis=1)
         named = grades.isin(["moderate", "strong"]).to_numpy()
         entry = {"spots": int(named.sum()), "weak_spots": int((grades == "weak").sum())}
         if place is None:
@@ -87,14 +93,6 @@ def summarise_map(table: pd.DataFrame) -> dict:
         summary["terms"][term] = entry
         summary["sentences"].append(entry["sentence"])
     return finite_or_none(summary)
-
-
-def _grade(row, term: str) -> str | None:
-    """The confidence with which a diagnosed spot names ``term`` (None: not named there)."""
-    if row["status"] != "ok" or not row["left_out"]:
-        return None
-    grades = dict(zip(row["left_out"].split(";"), row["confidence"].split(";")))
-    return grades.get(term)
 
 
 def _spread(values: pd.Series) -> dict:

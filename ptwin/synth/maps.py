@@ -61,8 +61,10 @@ def write_map(out: Path, truth: Path, experiment: Experiment, layout: MapLayout)
     """Write the map (one recording set per spot, ``position`` in each meta.yaml) into ``out`` and its truth
     table to ``truth`` (CSV); the noise of spot i is drawn with seed ``experiment.seed + i``."""
     table = layout.spots(experiment)
+    inside = {**experiment.effects, **layout.region_effects}
+    table["effects"] = [";".join(sorted(inside if spot else experiment.effects)) for spot in table["in_region"]]
     for i, spot in enumerate(table.itertuples()):
-        effects = {**experiment.effects, **(layout.region_effects if spot.in_region else {})}
+        effects = inside if spot.in_region else experiment.effects
         at_spot = replace(
             experiment,
             permeability=float(spot.permeability),
@@ -72,10 +74,6 @@ def write_map(out: Path, truth: Path, experiment: Experiment, layout: MapLayout)
         )
         meta, curves = simulate(at_spot)
         write_recordings(out / spot.spot, replace(meta, position=(float(spot.x), float(spot.y))), curves)
-    table["effects"] = [
-        ";".join(sorted({**experiment.effects, **(layout.region_effects if inside else {})}))
-        for inside in table["in_region"]
-    ]
     truth.parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(truth, index=False, float_format="%.9g")
     return table
