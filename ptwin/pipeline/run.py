@@ -76,7 +76,8 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
         "seed": settings.seed,
     }
     hybrid = results["stages"]["hybrid"]
-    log.close(figures, hparams, {"hparam/val_rmse": hybrid["val_rmse"], "hparam/test_rmse": hybrid["test_rmse"]})
+    images = {name: output_dir / f"{name}.png" for name in figures}
+    log.close(images, hparams, {"hparam/val_rmse": hybrid["val_rmse"], "hparam/test_rmse": hybrid["test_rmse"]})
     payload = write_outputs(output_dir, results, diagnosis, figures)
     print_summary(results, payload, progress)
     progress(f"results in {output_dir} ({results['seconds']:.1f} s)")

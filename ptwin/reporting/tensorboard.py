@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import torch
+from matplotlib.image import imread
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
@@ -57,9 +58,10 @@ class TrainingLog:
     def end_training(self) -> None:
         self.bar.close()
 
-    def close(self, figures: dict, hparams: dict, metrics: dict) -> None:
-        """Add the figures and the run's hyperparameters with their metrics, and close the event file."""
-        for name, figure in figures.items():
-            self.writer.add_figure(name, figure)
+    def close(self, images: dict[str, Path], hparams: dict, metrics: dict) -> None:
+        """Add the figures (their saved PNG files, not drawn a second time) and the run's hyperparameters
+        with their metrics, and close the event file."""
+        for name, path in images.items():
+            self.writer.add_image(name, imread(path)[..., :3], dataformats="HWC")
         self.writer.add_hparams(hparams, metrics, run_name=".")
         self.writer.close()
