@@ -6,6 +6,7 @@ import torch
 import ptwin
 from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.recordings import load_recordings
+from ptwin.physics.contact import ContactNuisance
 from ptwin.physics.elastic import ReferenceCurve
 from ptwin.physics.model import ForceModel
 from ptwin.physics.samples import Samples
@@ -48,6 +49,26 @@ def test_each_term_reproduces_the_recording_it_was_concealed_in(term, tmp_path, 
         effect = (without(samples) - samples.force)[use].square().mean().sqrt()
     assert effect > 2e-9  # the term matters here ...
     assert error < 0.1 * effect  # ... and the model with its true parameters accounts for it
+
+
+def test_one_pass_over_samples_and_nodes_equals_the_elastic_law_first(tmp_path, coarse_cache):
+    # components() runs the samples and the reference's depth nodes through the rate forces together; reading
+    # the elastic law off the nodes first (elastic_nodes) and the samples' rate forces after must agree, term
+    # by term and in order, with contacts corrected on the curves (never on the nodes) and a hereditary term
+    # between two direct ones.
+    basis_path = next(coarse_cache.glob("*.pt"))
+    folder = simulated_set(tmp_path, base_speeds=(0.5e-6, 40e-6), samples=300, noise_std=0.0)
+    terms = ("solid_viscosity", "power_law_rheology", "pore_pressure_relaxation", "contact_offset")
+    model, samples = model_for(folder, basis_path, terms, {t: TRUTHS[t] for t in terms})
+    model.contact = ContactNuisance(samples.curve_ids)
+    with torch.no_grad():
+        model.contact.offsets.fill_(30e-9)
+        one_pass = model.components(samples)
+        elastic = model.elastic(model.depth(samples))
+        two_passes = {"elastic": elastic, **model.rate_forces(samples, elastic)}
+    assert list(one_pass) == list(two_passes) == ["elastic", "fluid", "solid_viscosity", "power_law_rheology"]
+    for name, force in two_passes.items():
+        torch.testing.assert_close(one_pass[name], force, rtol=1e-12, atol=1e-21)
 
 
 def test_terms_report_non_physical_values():

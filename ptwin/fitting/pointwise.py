@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from torch.func import jvp
 
-from ptwin.physics.model import ForceModel
+from ptwin.physics.model import ForceModel, total
 from ptwin.physics.samples import Samples
 
 
@@ -44,7 +44,7 @@ def apparent_permeability(
     deeper than ``plateau_from`` × the curve's depth."""
 
     def residual(log_k):
-        return samples.force - sum(base.components(samples, log_k.exp()).values())
+        return samples.force - total(base.components(samples, log_k.exp()))
 
     log_k = torch.full_like(samples.force, math.log(start))
     with torch.no_grad():

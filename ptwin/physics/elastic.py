@@ -86,4 +86,4 @@ class ReferenceCurve(nn.Module):
     def interpolate(self, node_values: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
         """Linear interpolation of values at the depth nodes to ``depth`` [m]."""
         index, t = self.bracket(depth)
-        return node_values[index] * (1 - t) + node_values[index + 1] * t
+        return torch.lerp(node_values[index], node_values[index + 1], t)

@@ -24,7 +24,7 @@ from ptwin.physics.log_grid import LogGridFunctions
 
 
 class _SeparableLaw(torch.autograd.Function):
-    """F = A·U·R³/K·c(x) [N] as one autograd node, its derivatives in closed form.
+    """F = A·U·R³/K·c(x) [N] (A: μ and the laws' constants) as one autograd node, its derivatives in closed form.
 
     Scaled coordinates leave U, K and R exact power laws (U¹, K⁻¹, R³) and one shape
     function c of the aspect ratio x, whose log–log slope s the Hermite table gives with
@@ -116,10 +116,12 @@ class FluidForce(nn.Module):
             raise ValueError("basis: the contact-radius mode is not a power law; rebuild it")
         laws = [self.functions[name].power_law for name in ("velocity", "permeability", "contact_radius")]
         shape = self.functions[self.shape]
-        # The fused path's law: F/μ = prefactor·U·R³/K·c(x), c one-signed.
+        # The fused path's law: F = prefactor·U·R³/K·c(x), c one-signed; μ is in the prefactor, as every
+        # constant factor taken into the fused node is one zero-tangent op fewer under forward AD.
         self._separable_prefactor = None
         if [law and law[1] for law in laws] == [1, -1, 3] and shape.rank == 1 and shape.logarithmic:
-            self._separable_prefactor = math.prod(law[0] for law in laws) * self.core.item() * shape.signs.item()
+            coefficient = math.prod(law[0] for law in laws) * self.core.item() * shape.signs.item()
+            self._separable_prefactor = self.viscosity * coefficient
 
     @classmethod
     def load(cls, path: str | Path, permeability: float = 2e-16, viscosity: float = 1e-3) -> FluidForce:
@@ -148,11 +150,11 @@ class FluidForce(nn.Module):
             r = torch.where(below, torch.full_like(r, smallest), r)
         last = h / r if self.coordinates == "scaled" else h
         last = self._in_range(self.shape, last, clamp_above=self.shape == "aspect_ratio")
-        value = self._per_viscosity(u, r, last, permeability.reshape(-1))  # one K, or one per point
-        return (self.viscosity * (value if scale is None else scale * value)).reshape(shape)
+        force = self._force(u, r, last, permeability.reshape(-1))  # one K, or one per point
+        return (force if scale is None else scale * force).reshape(shape)
 
-    def _per_viscosity(self, u, r, last, permeability) -> torch.Tensor:
-        """F/μ on the grids (R at or above its minimum)."""
+    def _force(self, u, r, last, permeability) -> torch.Tensor:
+        """F on the grids (R at or above its minimum) [N]."""
         if self._separable_prefactor is not None:
             return _SeparableLaw.apply(u, r, last, permeability, self.functions[self.shape], self._separable_prefactor)[
                 0
@@ -165,13 +167,14 @@ class FluidForce(nn.Module):
         }
         factors = [self.functions[name](values[name]) for name in self.names]
         if self.core.numel() == 1:
-            return self.core.reshape(()) * factors[0][:, 0] * factors[1][:, 0] * factors[2][:, 0] * factors[3][:, 0]
+            rank_one = factors[0][:, 0] * factors[1][:, 0] * factors[2][:, 0] * factors[3][:, 0]
+            return self.viscosity * self.core.reshape(()) * rank_one
         # One dimension at a time, last first: the widest intermediate is (B, r0·r1·r2),
         # where a single einsum over the core would build (B, r1·r2·r3) (GBs per 1e6 points).
         value = factors[3] @ self.core.reshape(-1, self.core.shape[3]).T
         for factor in (factors[2], factors[1], factors[0]):
             value = (value.reshape(value.shape[0], -1, factor.shape[1]) * factor[:, None, :]).sum(-1)
-        return value[:, 0]
+        return self.viscosity * value[:, 0]
 
     @staticmethod
     def _check_inputs(velocity, contact_radius, height) -> None:

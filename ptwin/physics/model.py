@@ -26,6 +26,12 @@ def smooth_contact_radius(depth: torch.Tensor, probe_radius: float) -> torch.Ten
     return squared.sqrt().where(inside, torch.zeros_like(w))
 
 
+def total(forces: dict[str, torch.Tensor]) -> torch.Tensor:
+    """The sum of the forces [N]; stacked, not Python's ``sum``, whose start 0 is one more constant
+    operand (a zero tangent shaped in Python) under forward AD, in every Jacobian."""
+    return torch.stack(list(forces.values())).sum(0)
+
+
 def _sample_name(samples: Samples, index: int) -> str:
     """'curve v5, sample 123' for a sample index of ``samples`` (counted within its curve)."""
     curve = int(samples.curve[index])
@@ -82,6 +88,11 @@ class ForceModel(nn.Module):
         ``elastic``: F_el of the samples, for terms acting on it (left out when None);
         ``permeability``: K [m²] instead of the model's, one or one per sample.
         """
+        forces = self._direct_forces(samples, permeability)
+        return forces if elastic is None else self._with_elastic_terms(forces, samples, elastic)
+
+    def _direct_forces(self, samples: Samples, permeability: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """The fluid force (lagged, if a term says so) and the forces of the terms not acting on F_el [N]."""
         depth = self.depth(samples)
         for term in self.terms.values():
             shift = term.depth_shift()
@@ -101,11 +112,18 @@ class ForceModel(nn.Module):
         forces = {"fluid": fluid}
         for name, term in self.terms.items():
             added = term.force(samples, radius)
-            if added is None and elastic is not None:
-                added = term.elastic_force(samples, elastic)
             if added is not None:
                 forces[name] = added
         return forces
+
+    def _with_elastic_terms(self, forces: dict[str, torch.Tensor], samples: Samples, elastic: torch.Tensor):
+        """``forces`` (``_direct_forces``) with the forces of the terms acting on F_el, in the terms' order."""
+        ordered = {"fluid": forces["fluid"]}
+        for name, term in self.terms.items():
+            added = forces[name] if name in forces else term.elastic_force(samples, elastic)
+            if added is not None:
+                ordered[name] = added
+        return ordered
 
     def elastic_nodes(self, permeability: torch.Tensor | None = None, nodes: torch.Tensor | None = None):
         """F_el at the reference's depth nodes [N] (or at those indexed by ``nodes``, one K each:
@@ -115,7 +133,12 @@ class ForceModel(nn.Module):
         if nodes is not None and len(self.terms):
             raise ValueError("a per-node permeability is defined for the base model only (no terms)")
         at = self.reference.node_samples(nodes)
-        unrelaxed = at.force - sum(self.rate_forces(at, None, permeability).values())
+        return self._elastic_law(at, self.rate_forces(at, None, permeability))
+
+    def _elastic_law(self, at: Samples, rate_forces: dict[str, torch.Tensor]) -> torch.Tensor:
+        """F_el at the reference's node samples ``at`` [N]: the reference force less this model's rate forces
+        there (``rate_forces``), the hereditary terms inverted."""
+        unrelaxed = at.force - total(rate_forces)
         hereditary = [term.elastic_modes(at) for term in self.terms.values() if term.ACTS_ON_ELASTIC]
         if not hereditary:
             return unrelaxed
@@ -139,8 +162,17 @@ class ForceModel(nn.Module):
     def components(self, samples: Samples, permeability: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """{'elastic': F_el, 'fluid': F_D or F_p, term name: its added force} [N], each (S,);
         ``permeability``: K [m²] instead of the model's, one or one per sample (stage 1's K(w))."""
-        elastic = self.elastic(self.depth(samples), permeability)
-        return {"elastic": elastic, **self.rate_forces(samples, elastic, permeability)}
+        if permeability is not None or not self.self_consistent:
+            elastic = self.elastic(self.depth(samples), permeability)
+            return {"elastic": elastic, **self.rate_forces(samples, elastic, permeability)}
+        # The rate forces of the samples and of the reference's depth nodes (for the elastic law) in one
+        # pass: half the ops, and under forward AD (jacfwd, in every fit) ops cost more than their arithmetic.
+        nodes = self.reference.node_samples()
+        both, count = self._direct_forces(samples.join(nodes)), len(samples)
+        law = self._elastic_law(nodes, {name: force[count:] for name, force in both.items()})
+        elastic = self.reference.interpolate(law, self.depth(samples))
+        direct = {name: force[:count] for name, force in both.items()}
+        return {"elastic": elastic, **self._with_elastic_terms(direct, samples, elastic)}
 
     def forward(self, samples: Samples) -> torch.Tensor:
-        return sum(self.components(samples).values())
+        return total(self.components(samples))
