@@ -60,7 +60,7 @@ def ting_integral(signal: torch.Tensor, alpha: torch.Tensor, time: torch.Tensor,
     offset is no stress in the network (dropping it shifted every curve by it)."""
     c0, weights, times = kernel_for(alpha, time)
     origin = linear_origin(signal, start)
-    modes = relaxation_integral(signal, times[:, None].expand(-1, signal.numel()), time, start)
+    modes = relaxation_integral(signal, times[:, None], time, start)
     return origin + c0 * (signal - origin) + weights @ modes
 
 

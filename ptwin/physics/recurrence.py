@@ -91,12 +91,13 @@ def hereditary_inverse(
         decay = torch.exp(-since.clamp(min=0)[..., None] / times)  # (B, B + 1, M)
         mean = _step_mean(torch.diff(time[begin - 1 : end])[:, None] / times)  # (B, M): each step's mean
         lower = torch.ones(end - begin, end - begin, dtype=torch.bool, device=time.device).tril()
-        memory = (decay[:, 1:] * mean * weights).sum(-1).where(lower, torch.zeros_like(since[:, 1:]))
-        system = (1 + extra) * lower.to(time.dtype) + memory
+        # Products with the parameters (weights, extra) as matmuls or in one sum where a constant factor
+        # would do: under forward AD each constant operand of an elementwise op costs a Python shape check.
+        system = ((decay[:, 1:] * mean) @ weights + (1 + extra)).where(lower, torch.zeros_like(since[:, 1:]))
         carried = decay[:, 0] @ (weights * modes)
         previous = values[-1][-1]
-        rhs = target[begin:end] + extra * first - (1 + extra) * previous - carried
+        rhs = target[begin:end] - carried - previous + extra * (first - previous)
         increments = torch.linalg.solve_triangular(system, rhs[:, None], upper=False)[:, 0]
         values.append(previous + torch.cumsum(increments, 0))
-        modes = decay[-1, 0] * modes + (decay[-1, 1:] * mean).T @ increments
+        modes = torch.diag(decay[-1, 0]) @ modes + (decay[-1, 1:] * mean).T @ increments
     return torch.cat(values)
