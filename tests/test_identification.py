@@ -65,6 +65,28 @@ def test_regularised_newton_converges_k_to_the_minimum_of_the_hybrid_cost(prepar
     assert math.exp(optimum.item()) == pytest.approx(TRUE_K, rel=0.05)
 
 
+@pytest.mark.parametrize("which", ["all", "permeability", "network", "reversed"])
+def test_hybrid_jacobian_by_parts_equals_jacfwd_of_the_whole_residual(prepared, which):
+    # The hybrid step's J: jacfwd for the physics' own parameters, per-sample gradients for the network's,
+    # joined through the residual's assembly; against jacfwd over all of θ, for any set and order of names.
+    _, p = prepared
+    samples, train = p.samples, p.split.train
+    twin = p.make_model.twin(2.5e-16, 3e-10, samples, train)
+    groups = twin.parameter_groups()
+    names = {
+        "all": groups["physics"] + groups["network"],
+        "permeability": ["physics.fluid.log_permeability"],
+        "network": groups["network"],
+        "reversed": (groups["physics"] + groups["network"])[::-1],
+    }[which]
+    vector, residual = hybrid_residual(twin, samples, train, 1e-2, names)
+    theta = vector.get() * 1.01
+    expected, r = torch.func.jacfwd(lambda t: (residual(t), residual(t)), has_aux=True)(theta)
+    jacobian, r_parts = residual.linearise(theta)
+    torch.testing.assert_close(r_parts, r, rtol=1e-13, atol=0)
+    torch.testing.assert_close(jacobian, expected, rtol=1e-10, atol=1e-12 * expected.abs().max().item())
+
+
 def test_curve_split_holds_out_the_fastest_curve_whole(prepared):
     _, p = prepared
     samples = p.samples

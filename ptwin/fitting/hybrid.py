@@ -10,12 +10,13 @@ a learning rate per parameter group.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 
 import torch
 from torch import nn
-from torch.func import functional_call
+from torch.func import functional_call, grad, jacfwd, vmap
 
-from ptwin.fitting.lm import LevenbergMarquardt, ParameterVector
+from ptwin.fitting.lm import ParameterVector, jacobian_and_value
 from ptwin.physics.model import PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
 
@@ -75,8 +76,30 @@ class ErrorNetwork(nn.Module):
         return torch.stack([INPUTS[name](samples) for name in self.inputs], dim=1)
 
     def forward(self, samples: Samples) -> torch.Tensor:
-        x = (self.features(samples) - self.mean) / self.scale
-        return self.force_scale * self.layers(x).squeeze(1)
+        return self._output(self.layers, self._standardised(samples))
+
+    def _standardised(self, samples: Samples) -> torch.Tensor:
+        return (self.features(samples) - self.mean) / self.scale
+
+    def _output(self, layers, x: torch.Tensor) -> torch.Tensor:
+        return self.force_scale * layers(x).squeeze(-1)
+
+    def jacobian(self, samples: Samples, index: torch.Tensor, values: dict[str, torch.Tensor]):
+        """(∂Y1/∂θ (n, p), Y1 (n,)) [N] on ``samples[index]`` with this network's parameters set to ``values``
+        ({name: tensor}; θ their entries in that order). Y1 of a sample depends on that sample alone, so the
+        rows are per-sample gradients (vmap of grad): one reverse pass over (n, hidden) arrays, where jacfwd
+        pushes one tangent per weight through every sample."""
+        layer_values = {name.removeprefix("layers."): value for name, value in values.items()}
+
+        def one(layer_values, x):
+            y = self._output(lambda z: functional_call(self.layers, layer_values, (z,)), x)
+            return y, y
+
+        gradients, output = vmap(grad(one, has_aux=True), in_dims=(None, 0))(
+            layer_values, self._standardised(samples)[index]
+        )
+        columns = [gradients[name].reshape(output.numel(), -1) for name in layer_values]
+        return torch.cat(columns, 1) if columns else output.new_zeros(output.numel(), 0), output
 
 
 class HybridTwin(nn.Module):
@@ -103,20 +126,70 @@ class HybridTwin(nn.Module):
 
 
 def hybrid_residual(twin: HybridTwin, samples: Samples, index: torch.Tensor, regularisation: float, names):
-    """θ ↦ [E/σ, (Y1 − E)/σ, √λ Θ] for the parameters ``names`` (J = ½‖·‖²)."""
+    """(ParameterVector over ``names``, ``HybridResidual``: θ ↦ [E/σ, (Y1 − E)/σ, √λ Θ], J = ½‖·‖²)."""
     vector = ParameterVector(twin, names)
-    network = [n for n in names if n.startswith("network.")]
-    force, noise = samples.force[index], samples.noise_floor[index]
+    return vector, HybridResidual(twin, samples, index, regularisation, vector)
 
-    def residual(theta):
-        values = vector.as_dict(theta)
-        physics, correction = functional_call(twin, values, (samples,))
-        error = (force - physics[index]) / noise
-        mismatch = correction[index] / noise - error
-        weights = torch.cat([values[n].reshape(-1) for n in network]) if network else theta[:0]
-        return torch.cat([error, mismatch, regularisation**0.5 * weights])
 
-    return vector, residual
+class HybridResidual:
+    """θ ↦ [E/σ, (Y1 − E)/σ, √λ Θ] on ``samples[index]``, θ the entries of ``vector``; ``linearise(θ)`` → (J, r).
+
+    The physics model depends on its own parameters only and the network on its own, so each is
+    differentiated apart — the physics by jacfwd over its few parameters, the network by per-sample
+    gradients (``ErrorNetwork.jacobian``) — and J follows by the chain rule through the residual's assembly,
+    written once. (jacfwd over all of θ pushed the network's ~25 tangents through every sample: most of a
+    hybrid step.)
+    """
+
+    def __init__(self, twin: HybridTwin, samples: Samples, index: torch.Tensor, regularisation: float, vector):
+        self.twin, self.samples, self.index, self.regularisation = twin, samples, index, regularisation
+        self.vector = vector
+        self.force, self.noise = samples.force[index], samples.noise_floor[index]
+        starts = torch.tensor([0, *vector.sizes]).cumsum(0)
+        columns = {n: torch.arange(starts[i], starts[i + 1]) for i, n in enumerate(vector.names)}
+        self.columns = {
+            part: torch.cat([columns[n] for n in vector.names if n.startswith(f"{part}.")] + [torch.zeros(0).long()])
+            for part in ("physics", "network")
+        }
+
+    def _values(self, part: str, entries: torch.Tensor) -> dict[str, torch.Tensor]:
+        """{name within the physics model or the network: tensor} from its own entries of θ."""
+        names = [n for n in self.vector.names if n.startswith(f"{part}.")]
+        where = [self.vector.names.index(n) for n in names]
+        pieces = entries.split([self.vector.sizes[i] for i in where])
+        return {n[len(part) + 1 :]: v.reshape(self.vector.shapes[i]) for n, v, i in zip(names, pieces, where)}
+
+    def _prediction(self, part: str, entries: torch.Tensor) -> torch.Tensor:
+        """The physics force or the network's correction on the samples [N], its own entries of θ set."""
+        return functional_call(getattr(self.twin, part), self._values(part, entries), (self.samples,))[self.index]
+
+    def _assemble(self, physics: torch.Tensor, correction: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
+        error = (self.force - physics) / self.noise
+        mismatch = correction / self.noise - error
+        return torch.cat([error, mismatch, self.regularisation**0.5 * theta[self.columns["network"]]])
+
+    def __call__(self, theta: torch.Tensor) -> torch.Tensor:
+        physics, network = (self._prediction(part, theta[self.columns[part]]) for part in ("physics", "network"))
+        return self._assemble(physics, network, theta)
+
+    def linearise(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(J, r) at θ."""
+        values, jacobians = {}, {}
+        physics = theta[self.columns["physics"]]
+        if physics.numel():
+            jacobians["physics"], values["physics"] = jacobian_and_value(partial(self._prediction, "physics"), physics)
+        else:
+            with torch.no_grad():
+                values["physics"] = self._prediction("physics", physics)
+            jacobians["physics"] = values["physics"].new_zeros(values["physics"].numel(), 0)
+        network = self._values("network", theta[self.columns["network"]])
+        jacobians["network"], values["network"] = self.twin.network.jacobian(self.samples, self.index, network)
+
+        def linearised(t):  # each model replaced by its tangent at θ: the same J, through _assemble
+            moved = {part: values[part] + jacobians[part] @ (t - theta)[self.columns[part]] for part in values}
+            return self._assemble(moved["physics"], moved["network"], t)
+
+        return jacfwd(linearised)(theta), self._assemble(values["physics"], values["network"], theta)
 
 
 def newton_permeability(
@@ -135,7 +208,7 @@ def newton_permeability(
     """
     name = f"physics.{PERMEABILITY}"
     vector, residual = hybrid_residual(twin, samples, index, regularisation, [name])
-    linearise = LevenbergMarquardt(residual, vector.get()).linearise
+    linearise = residual.linearise
     log_k = vector.get()
     iteration = 0
     while iteration < iterations:
