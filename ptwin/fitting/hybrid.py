@@ -10,7 +10,6 @@ a learning rate per parameter group.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from functools import partial
 
 import torch
 from torch import nn
@@ -145,23 +144,19 @@ class HybridResidual:
         self.twin, self.samples, self.index, self.regularisation = twin, samples, index, regularisation
         self.vector = vector
         self.force, self.noise = samples.force[index], samples.noise_floor[index]
-        starts = torch.tensor([0, *vector.sizes]).cumsum(0)
-        columns = {n: torch.arange(starts[i], starts[i + 1]) for i, n in enumerate(vector.names)}
+        owners = [name for name, size in zip(vector.names, vector.sizes) for _ in range(size)]  # per entry of θ
         self.columns = {
-            part: torch.cat([columns[n] for n in vector.names if n.startswith(f"{part}.")] + [torch.zeros(0).long()])
+            part: torch.tensor([i for i, name in enumerate(owners) if name.startswith(f"{part}.")], dtype=torch.long)
             for part in ("physics", "network")
         }
 
-    def _values(self, part: str, entries: torch.Tensor) -> dict[str, torch.Tensor]:
-        """{name within the physics model or the network: tensor} from its own entries of θ."""
-        names = [n for n in self.vector.names if n.startswith(f"{part}.")]
-        where = [self.vector.names.index(n) for n in names]
-        pieces = entries.split([self.vector.sizes[i] for i in where])
-        return {n[len(part) + 1 :]: v.reshape(self.vector.shapes[i]) for n, v, i in zip(names, pieces, where)}
+    def _own(self, part: str, theta: torch.Tensor) -> dict[str, torch.Tensor]:
+        """θ's values of the physics model's or the network's parameters, by their names within it."""
+        return {n[len(part) + 1 :]: v for n, v in self.vector.as_dict(theta).items() if n.startswith(f"{part}.")}
 
-    def _prediction(self, part: str, entries: torch.Tensor) -> torch.Tensor:
-        """The physics force or the network's correction on the samples [N], its own entries of θ set."""
-        return functional_call(getattr(self.twin, part), self._values(part, entries), (self.samples,))[self.index]
+    def _prediction(self, part: str, theta: torch.Tensor) -> torch.Tensor:
+        """The physics force or the network's correction on the samples [N] at θ."""
+        return functional_call(getattr(self.twin, part), self._own(part, theta), (self.samples,))[self.index]
 
     def _assemble(self, physics: torch.Tensor, correction: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
         error = (self.force - physics) / self.noise
@@ -169,20 +164,21 @@ class HybridResidual:
         return torch.cat([error, mismatch, self.regularisation**0.5 * theta[self.columns["network"]]])
 
     def __call__(self, theta: torch.Tensor) -> torch.Tensor:
-        physics, network = (self._prediction(part, theta[self.columns[part]]) for part in ("physics", "network"))
-        return self._assemble(physics, network, theta)
+        return self._assemble(self._prediction("physics", theta), self._prediction("network", theta), theta)
 
     def linearise(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(J, r) at θ."""
         values, jacobians = {}, {}
-        physics = theta[self.columns["physics"]]
+        physics = self.columns["physics"]
         if physics.numel():
-            jacobians["physics"], values["physics"] = jacobian_and_value(partial(self._prediction, "physics"), physics)
+            jacobians["physics"], values["physics"] = jacobian_and_value(
+                lambda entries: self._prediction("physics", theta.index_copy(0, physics, entries)), theta[physics]
+            )
         else:
             with torch.no_grad():
-                values["physics"] = self._prediction("physics", physics)
+                values["physics"] = self._prediction("physics", theta)
             jacobians["physics"] = values["physics"].new_zeros(values["physics"].numel(), 0)
-        network = self._values("network", theta[self.columns["network"]])
+        network = self._own("network", theta)
         jacobians["network"], values["network"] = self.twin.network.jacobian(self.samples, self.index, network)
 
         def linearised(t):  # each model replaced by its tangent at θ: the same J, through _assemble
