@@ -91,8 +91,8 @@ def hereditary_inverse(
         decay = torch.exp(-since.clamp(min=0)[..., None] / times)  # (B, B + 1, M)
         mean = _step_mean(torch.diff(time[begin - 1 : end])[:, None] / times)  # (B, M): each step's mean
         lower = torch.ones(end - begin, end - begin, dtype=torch.bool, device=time.device).tril()
-        # Products with the parameters (weights, extra) as matmuls or in one sum where a constant factor
-        # would do: under forward AD each constant operand of an elementwise op costs a Python shape check.
+        # The parameters (weights, extra) enter by matmuls and single sums, not as elementwise products
+        # with constants: under forward AD each constant operand costs a zero tangent shaped in Python.
         system = ((decay[:, 1:] * mean) @ weights + (1 + extra)).where(lower, torch.zeros_like(since[:, 1:]))
         carried = decay[:, 0] @ (weights * modes)
         previous = values[-1][-1]
