@@ -18,7 +18,7 @@ from ptwin.pipeline.identify import Identification, identify, per_curve_fits
 from ptwin.pipeline.prepare import Prepared, prepare
 from ptwin.pipeline.settings import Settings
 from ptwin.pipeline.twin import train_twin
-from ptwin.reporting.figures import save_figures
+from ptwin.reporting.figures import figure_file, save_figures
 from ptwin.reporting.report import print_summary
 from ptwin.reporting.results import (
     apparent_record,
@@ -76,7 +76,7 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
         "seed": settings.seed,
     }
     hybrid = results["stages"]["hybrid"]
-    images = {name: output_dir / f"{name}.png" for name in figures}
+    images = {name: figure_file(output_dir, name) for name in figures}
     log.close(images, hparams, {"hparam/val_rmse": hybrid["val_rmse"], "hparam/test_rmse": hybrid["test_rmse"]})
     payload = write_outputs(output_dir, results, diagnosis, figures)
     print_summary(results, payload, progress)

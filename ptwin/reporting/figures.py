@@ -45,6 +45,11 @@ def _per_speed(samples, index, series: dict, ylabel: str, title: str, residual=F
     return figure
 
 
+def figure_file(output_dir: Path, name: str) -> Path:
+    """Where ``save_figures`` writes figure ``name`` (report.md links it by that name)."""
+    return output_dir / f"{name}.png"
+
+
 def save_figures(
     output_dir: Path, samples, split, identification, twin, diagnosis, corrected_per_curve, rate=None, progress=print
 ):
@@ -98,7 +103,7 @@ def save_figures(
     for name, build in builders.items():
         try:
             figure = build()
-            figure.savefig(output_dir / f"{name}.png", dpi=110)
+            figure.savefig(figure_file(output_dir, name), dpi=110)
         except ValueError as error:  # e.g. no positive finite value to put on a log axis
             progress(f"figure {name} not drawn: {str(error).splitlines()[0]}")
             plt.close("all")
