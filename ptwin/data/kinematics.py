@@ -58,9 +58,10 @@ class CurveKinematics:
         return self.noise.std
 
 
-def contact_radius(depth: np.ndarray, probe_radius: float) -> np.ndarray:
-    """R = sqrt(ρ² − (ρ − w)²) for 0 ≤ w ≤ ρ, and 0 for w < 0."""
-    w = np.clip(depth, 0.0, probe_radius)
+def contact_radius(depth, probe_radius: float):
+    """R = sqrt(ρ² − (ρ − w)²) for 0 ≤ w ≤ ρ, and 0 for w < 0; an array or one float (ufuncs only: the
+    simulator calls it on one depth thousands of times a curve)."""
+    w = np.minimum(np.maximum(depth, 0.0), probe_radius)
     return np.sqrt(probe_radius**2 - (probe_radius - w) ** 2)
 
 

@@ -27,6 +27,8 @@ def force_coefficient(aspect_ratio: np.ndarray | float) -> np.ndarray:
     coth(j_n x) still differs from 1 (none once x > 20/j_1 ≈ 8, so thick samples cost O(1))."""
     x = np.asarray(aspect_ratio, dtype=np.float64)
     terms = int(np.searchsorted(_ZEROS, _SATURATED / x.min())) if x.size else 0
+    if terms == 0:  # every coth has saturated; the simulator asks this on thick samples at every step
+        return _C_INFINITY + 0.0 * x
     j = _ZEROS[:terms]
     with np.errstate(over="ignore"):  # e^{2jx} = inf past saturation: its term is 2/inf = 0, as it should be
         correction = 4 * np.pi * np.sum(2.0 / (np.expm1(2 * j * x[..., None]) * j**3), axis=-1)

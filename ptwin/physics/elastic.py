@@ -14,15 +14,15 @@ from ptwin.data.kinematics import CurveKinematics, window_line
 from ptwin.physics.samples import Samples
 
 
-def hertz_force(depth: np.ndarray, effective_modulus: float, probe_radius: float) -> np.ndarray:
-    """F = 4/3·E*·√ρ·w^1.5 [N] for depth w [m] (0 before contact)."""
-    w = np.clip(depth, 0.0, None)
-    return 4.0 / 3.0 * effective_modulus * np.sqrt(probe_radius) * w**1.5
+def hertz_force(depth, effective_modulus: float, probe_radius: float):
+    """F = 4/3·E*·√ρ·w^1.5 [N] for depth w [m] (0 before contact); an array or one float (the simulator's
+    right-hand side, called thousands of times a curve: ufuncs, no array wrapping)."""
+    return 4.0 / 3.0 * effective_modulus * np.sqrt(probe_radius) * np.maximum(depth, 0.0) ** 1.5
 
 
-def hertz_stiffness(depth: np.ndarray, effective_modulus: float, probe_radius: float) -> np.ndarray:
-    """dF/dw = 2·E*·√(ρ w) [N/m]."""
-    return 2.0 * effective_modulus * np.sqrt(probe_radius * np.clip(depth, 0.0, None))
+def hertz_stiffness(depth, effective_modulus: float, probe_radius: float):
+    """dF/dw = 2·E*·√(ρ w) [N/m]; an array or one float, as ``hertz_force``."""
+    return 2.0 * effective_modulus * np.sqrt(probe_radius * np.maximum(depth, 0.0))
 
 
 class ReferenceCurve(nn.Module):

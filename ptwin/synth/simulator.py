@@ -233,13 +233,13 @@ def _balance(e: Experiment, speed: float, drag: float, kernel, stopped: float | 
 
     def rates(since_contact, state, balance=False):
         w, q, pore, *modes = state
-        radius = contact_radius(np.array([w]), rho)[0]
+        radius = contact_radius(w, rho)
         permeability = e.permeability * np.exp(-m * w / rho)
         fluid_coefficient = coefficient(radius, H0 - w, permeability)
-        stiffness = hertz_stiffness(np.array([w]), e.effective_modulus, rho)[0]
+        stiffness = hertz_stiffness(w, e.effective_modulus, rho)
         # k(z − w) − drag with z − drag/k = v·τ exactly: no cancellation at first contact.
         base = speed * since_contact if stopped is None else stopped + drag / k
-        unbalanced = k * (base - w) - c0 * hertz_force(np.array([w]), e.effective_modulus, rho)[0] - weights @ modes
+        unbalanced = k * (base - w) - c0 * hertz_force(w, e.effective_modulus, rho) - weights @ modes
         unbalanced = unbalanced - g * q
         if not lagging:
             w_rate = unbalanced / (fluid_coefficient + np.pi * gamma * radius)
