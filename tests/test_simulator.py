@@ -75,6 +75,16 @@ def test_force_balance_holds_along_the_curve_for_combined_terms(effects):
     assert np.abs(curve.balance_residual).max() < 1e-6 * np.abs(curve.force).max()
 
 
+def test_a_curve_without_its_balance_check_is_the_same_curve():
+    """balance=False (the recordings, the design's predictions) skips the residual, nothing else."""
+    effects = {"solid_relaxation": {"g": 0.3, "tau": 0.05}}
+    checked = simulate_curve(fast(effects=effects), 40e-6)
+    unchecked = simulate_curve(fast(effects=effects), 40e-6, balance=False)
+    assert np.abs(checked.balance_residual).max() > 0
+    assert not unchecked.balance_residual.any()
+    np.testing.assert_array_equal(unchecked.force, checked.force)
+
+
 def test_closed_form_and_pgd_fluid_forces_agree(basis_file):
     closed = simulate_curve(fast(), 40e-6).force
     pgd = simulate_curve(fast(fluid_basis=str(basis_file)), 40e-6).force

@@ -296,7 +296,8 @@ def _record(e, speed, drag, time, after, states, segment, rates, balance, held=N
     depth = np.minimum(z_true - np.where(since > stop, 0.0, drag) / k, 0.0)
     depth[after] = states[0]
     residual = np.zeros_like(time)
-    residual[after] = [(rates if t <= stop else held)(t, y, balance=True) for t, y in zip(since[after], states.T)]
+    if balance:
+        residual[after] = [(rates if t <= stop else held)(t, y, balance=True) for t, y in zip(since[after], states.T)]
     drift = e.param("force_drift", "rate") * time
     delta = e.param("contact_offset", "delta")
     force = k * (z_true - depth) + drift
@@ -318,7 +319,7 @@ def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
     frames = []
     for speed, replicate, hold, number in protocols:
         modulus = e.effective_modulus * (1.0 + e.stiffness_spread * artefacts.standard_normal())
-        curve = simulate_curve(e, speed, modulus, hold)
+        curve = simulate_curve(e, speed, modulus, hold, balance=False)  # a recording has no balance to check
         noise = correlated_noise(rng, curve.force.size, e.noise_std, e.noise_correlation)
         travel = curve.z - curve.z[0] + e.z_start  # the true base travel from contact
         offset = e.baseline_offset * artefacts.standard_normal() + e.tilt * travel
