@@ -1,4 +1,4 @@
-"""Stage 1's pointwise K(w), the hybrid twin's regularised Newton for K, and the splits."""
+"""Stage 1's pointwise K(w), the hybrid twin's regularised Newton for K, the splits, and fits of one curve alone."""
 
 import math
 
@@ -7,8 +7,9 @@ import torch
 
 from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.fitting.hybrid import hybrid_residual, newton_permeability
+from ptwin.fitting.physics_fit import fit_physics
 from ptwin.fitting.split import split_samples
-from ptwin.pipeline.identify import identify
+from ptwin.pipeline.identify import identify, per_curve_fits
 from ptwin.pipeline.prepare import prepare
 from tests.conftest import settings_for, simulated_set
 
@@ -100,3 +101,36 @@ def test_curve_split_holds_out_the_fastest_curve_whole(prepared):
     assert split.train.numel() / rest.numel() == pytest.approx(0.7 / 0.85, abs=1e-3)
     with pytest.raises(ValueError, match=r"split.held_out_curve 'v3' is not a fitted curve; pick one of"):
         split_samples(samples, (0.7, 0.15, 0.15), "curve", "v3")
+
+
+@pytest.fixture(scope="module")
+def estimated(tmp_path_factory, coarse_cache):
+    effects = {"pore_pressure_relaxation": {"M": 3e4}, "solid_relaxation": {"g": 0.2, "tau": 0.05}}
+    folder = simulated_set(
+        tmp_path_factory.mktemp("estimated"), effects=effects, contact_point="estimate", contact_error=1e-7
+    )
+    settings = settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}")
+    return settings, prepare(settings, progress=lambda line: None)
+
+
+def test_a_curve_alone_gets_the_forces_and_the_per_curve_fit_it_gets_among_the_others(estimated):
+    # Per-curve fits evaluate each curve alone: its recursions restart with it, its contact correction is
+    # found by its id, and the elastic law is the reference curve's either way.
+    settings, p = estimated
+    samples, train = p.samples, p.split.train
+    terms = ("pore_pressure_relaxation", "solid_relaxation")
+    model = p.make_model(terms)
+    with torch.no_grad():
+        model.contact.offsets.copy_(torch.linspace(-3e-8, 4e-8, len(samples.curve_ids)))
+        everything = model(samples)
+        for i in range(len(samples.curve_ids)):
+            alone, first = samples.curve_alone(i)
+            assert alone.curve_ids == (samples.curve_ids[i],)
+            torch.testing.assert_close(model(alone), everything[first : first + len(alone)], rtol=1e-12, atol=0)
+    fits = per_curve_fits(p.make_model, samples, train, ("solid_viscosity",), settings.optim.physics_fit.iterations)
+    assert set(fits) == set(samples.curve_ids)
+    for i, curve in enumerate(samples.curve_ids):
+        model = p.make_model(("solid_viscosity",))
+        among = fit_physics(model, samples, train[samples.curve[train] == i], settings.optim.physics_fit.iterations)
+        assert fits[curve].permeability == pytest.approx(among.permeability, rel=1e-6), curve
+        assert fits[curve].chi_square == pytest.approx(among.chi_square, rel=1e-6), curve

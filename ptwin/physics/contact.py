@@ -26,14 +26,14 @@ class ContactNuisance(nn.Module):
         self.offsets = nn.Parameter(torch.zeros(len(curve_ids), dtype=torch.float64))
 
     def shift(self, samples: Samples) -> torch.Tensor:
-        """What to subtract from each sample's depth [m]: its curve's correction. Samples of curves after
-        the fitted ones (a simulated next experiment, its contact known) get none, and so do samples
-        whose curves are not the fitted ones at all (the reference's depth nodes)."""
-        count = len(self.curve_ids)
-        if samples.curve_ids[:count] != self.curve_ids:
-            return torch.zeros_like(samples.depth)
-        extra = torch.zeros(len(samples.curve_ids) - count, dtype=self.offsets.dtype, device=self.offsets.device)
-        return torch.cat([self.offsets, extra])[samples.curve]
+        """What to subtract from each sample's depth [m]: its curve's correction, found by curve id (a fit
+        of one curve sees it alone). Curves that are not fitted ones get none: the reference curve (its
+        depth nodes) and a simulated next experiment, whose contact is known."""
+        position = {curve: i for i, curve in enumerate(self.curve_ids)}
+        none = len(self.curve_ids)
+        lookup = torch.tensor([position.get(curve, none) for curve in samples.curve_ids], device=samples.curve.device)
+        extra = torch.zeros(1, dtype=self.offsets.dtype, device=self.offsets.device)
+        return torch.cat([self.offsets, extra])[lookup[samples.curve]]
 
     def values(self) -> dict[str, float]:
         """The corrections [m] by curve id."""

@@ -57,6 +57,7 @@ class ReferenceCurve(nn.Module):
         self.register_buffer("time", as_tensor(np.maximum.accumulate(local(reference.time[use][order]))))
         self.register_buffer("velocity", as_tensor(local(reference.velocity[use][order])))
         self.base_speed = reference.base_speed
+        self.curve = reference.curve
 
     def node_samples(self, index: torch.Tensor | None = None) -> Samples:
         """The reference curve at the depth nodes (or those indexed by ``index``), as samples of one curve."""
@@ -73,7 +74,7 @@ class ReferenceCurve(nn.Module):
             curve=torch.zeros(n, dtype=torch.long, device=time.device),
             in_contact=torch.ones(n, dtype=torch.bool, device=time.device),
             noise_floor=torch.zeros_like(time),
-            curve_ids=("reference",),
+            curve_ids=(self.curve,),
         )
 
     def bracket(self, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

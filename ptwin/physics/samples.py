@@ -72,6 +72,19 @@ class Samples:
         values["curve_ids"] = self.curve_ids + other.curve_ids
         return Samples(**values)
 
+    def curve_alone(self, curve: int) -> tuple[Samples, int]:
+        """The samples of curve ``curve`` (an index into ``curve_ids``) as a set of that one curve, and where
+        they start in these: a fit to one curve need not evaluate the others (a model's force on a curve
+        depends on that curve's history and the reference curve alone)."""
+        rows = torch.nonzero(self.curve == curve).squeeze(1)
+        first = int(rows[0])
+        part = slice(first, first + rows.numel())  # a curve's samples are contiguous (``from_curves``, ``join``)
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        values = {name: value[part] if torch.is_tensor(value) else value for name, value in values.items()}
+        values["curve"] = torch.zeros_like(values["curve"])
+        values["curve_ids"] = (self.curve_ids[curve],)
+        return Samples(**values), first
+
     def __len__(self) -> int:
         return self.time.numel()
 

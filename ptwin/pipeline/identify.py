@@ -72,14 +72,16 @@ def per_curve_fits(
     values: dict | None = None,
 ) -> dict[str, PhysicsFit]:
     """One fit of K (and, with ``free_terms``, the terms' parameters from ``values``) per curve,
-    on the samples of ``index`` in it: {curve: PhysicsFit}; a curve whose fit fails is left out."""
+    on the samples of ``index`` in it, evaluated on that curve alone: {curve: PhysicsFit}; a curve
+    whose fit fails is left out."""
     fits = {}
     for i, curve in enumerate(samples.curve_ids):
         model = make_model(terms, values)
         for term in model.terms.values():
             term.requires_grad_(free_terms)
+        alone, first = samples.curve_alone(i)
         try:
-            fits[curve] = fit_physics(model, samples, index[samples.curve[index] == i], iterations)
+            fits[curve] = fit_physics(model, alone, index[samples.curve[index] == i] - first, iterations)
         except FitError:
             continue
     return fits
