@@ -17,6 +17,29 @@ def test_recovers_an_exponential_decay_from_a_poor_start():
     torch.testing.assert_close(theta, truth, rtol=1e-8, atol=1e-8)
 
 
+def test_a_settled_fit_stops_once_a_step_gains_less_than_asked_and_no_sooner():
+    # Noisy data: the cost converges to its floor; "settled" ends the run at the first accepted step
+    # gaining less than it (absolute), where the relative tolerance alone runs on to machine precision.
+    t = torch.linspace(0, 4, 200, dtype=torch.float64)
+    noise = 0.05 * torch.randn(200, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    data = 2.0 * torch.exp(-0.3 * t) + noise
+
+    def residual(theta):
+        return (theta[0] * torch.exp(-theta[1].exp() * t) - data) / 0.05
+
+    start = torch.tensor([0.5, 0.5], dtype=torch.float64)
+    steps = []
+    settled = LevenbergMarquardt(residual, start)
+    settled.run(200, tolerance=0.0, callback=steps.append, settled=1e-3)
+    full = LevenbergMarquardt(residual, start)
+    full.run(200, tolerance=0.0)
+    accepted = [step.cost for step in steps if step.accepted]
+    gains = [before - after for before, after in zip(accepted, accepted[1:])]
+    assert gains[-1] < 1e-3 and all(gain >= 1e-3 for gain in gains[:-1])
+    assert settled.state["iteration"] < full.state["iteration"]
+    assert 0 <= settled.state["cost"] - full.state["cost"] < 1e-2
+
+
 def test_learning_rate_scales_each_step():
     def residual(theta):
         return theta - torch.tensor([1.0, 1.0], dtype=torch.float64)

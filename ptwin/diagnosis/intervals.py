@@ -19,7 +19,7 @@ import math
 import torch
 
 from ptwin.fitting.lm import FitError, LevenbergMarquardt
-from ptwin.fitting.physics_fit import PhysicsFit, scaled_residual
+from ptwin.fitting.physics_fit import SETTLED, PhysicsFit, scaled_residual
 from ptwin.physics.samples import Samples
 
 LEVEL = 3.841458820694124  # the 95% point of χ² with one degree of freedom
@@ -53,7 +53,7 @@ def profile_interval(
         try:
             if others:
                 solver = LevenbergMarquardt(partial, warm["others"])
-                warm["others"] = solver.run(REFIT)
+                warm["others"] = solver.run(REFIT, settled=0.5 * SETTLED)
             with torch.no_grad():
                 chi_square = partial(warm["others"]).square().sum().item()
         except FitError:

@@ -158,14 +158,21 @@ class LevenbergMarquardt:
         s["iteration"] = s["iteration"] + 1
         return Step(int(s["iteration"]), s["cost"].item(), accepted, s["damping"].item(), gradient.detach())
 
-    def run(self, iterations: int, tolerance: float = 1e-10, callback: Callable[[Step], None] | None = None):
-        """Up to ``iterations`` steps; stops when an accepted step lowers the cost by < ``tolerance`` (relative)."""
+    def run(
+        self,
+        iterations: int,
+        tolerance: float = 1e-10,
+        callback: Callable[[Step], None] | None = None,
+        settled: float = 0.0,
+    ):
+        """Up to ``iterations`` steps; stops when an accepted step lowers the cost by < ``tolerance`` (relative)
+        or by < ``settled`` (absolute: a gain that means nothing in the cost's own units)."""
         while int(self.state["iteration"]) < iterations:
             before = self.state["cost"].item()
             step = self.step()
             if callback is not None:
                 callback(step)
-            if step.accepted and before - step.cost <= tolerance * before:
+            if step.accepted and before - step.cost <= max(tolerance * before, settled):
                 break
             if step.damping > 1e12:
                 break
