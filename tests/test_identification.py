@@ -1,6 +1,7 @@
 """Stage 1's pointwise K(w), the hybrid twin's regularised Newton for K, the splits, and fits of one curve alone."""
 
 import math
+from dataclasses import replace
 
 import pytest
 import torch
@@ -9,8 +10,11 @@ from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.fitting.hybrid import hybrid_residual, newton_permeability
 from ptwin.fitting.physics_fit import fit_physics
 from ptwin.fitting.split import split_samples
+from ptwin.physics.contact import ContactNuisance
 from ptwin.pipeline.identify import identify, per_curve_fits
 from ptwin.pipeline.prepare import prepare
+from ptwin.pipeline.run import _design
+from ptwin.synth.simulator import Experiment, simulate_curve
 from tests.conftest import settings_for, simulated_set
 
 pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
@@ -134,3 +138,19 @@ def test_a_curve_alone_gets_the_forces_and_the_per_curve_fit_it_gets_among_the_o
         among = fit_physics(model, samples, train[samples.curve[train] == i], settings.optim.physics_fit.iterations)
         assert fits[curve].permeability == pytest.approx(among.permeability, rel=1e-6), curve
         assert fits[curve].chi_square == pytest.approx(among.chi_square, rel=1e-6), curve
+
+
+def test_a_simulated_next_curve_never_takes_a_recorded_curves_contact_correction(estimated):
+    # Corrections are found by curve id: a recorded curve named 'next' must not lend its own to the design's
+    # simulated next experiment, whose contact is known.
+    settings, p = estimated
+    renamed = ("next", *p.samples.curve_ids[1:])
+    samples = replace(p.samples, curve_ids=renamed)
+    design = replace(_design(p, settings), samples=samples)
+    pseudo, _ = design._pseudo_samples(simulate_curve(Experiment(samples=200), 8e-6, balance=False))
+    assert pseudo.curve_ids[0] not in renamed
+    contact = ContactNuisance(renamed)
+    with torch.no_grad():
+        contact.offsets.fill_(5e-8)
+        shift = contact.shift(samples.join(pseudo))
+    assert (shift[: len(samples)] == 5e-8).all() and not shift[len(samples) :].any()

@@ -260,11 +260,14 @@ class ExperimentDesign:
             return math.inf
 
     def _pseudo_samples(self, curve: CurveSimulation) -> tuple[Samples, int]:
-        """The simulated curve as samples of a curve 'next' (every k-th sample, at most ``MAX_SAMPLES``),
-        with the set's noise std (a noise-free curve measures none), and k."""
+        """The simulated curve as samples of a curve 'next' (primed if a recorded curve has that name; every
+        k-th sample, at most ``MAX_SAMPLES``), with the set's noise std (a noise-free curve measures none), and k."""
+        name = "next"
+        while name in self.samples.curve_ids:  # fitted contact corrections are looked up by curve id
+            name += "'"
         frame = pd.DataFrame(
             {
-                "curve": "next",
+                "curve": name,
                 "base_speed": curve.base_speed,
                 "time": curve.time,
                 "z": curve.z,
@@ -272,7 +275,7 @@ class ExperimentDesign:
                 "segment": np.where(curve.segment == 1, "hold", "approach"),
             }
         )
-        meta = replace(self.meta, contact_point="known", reference_curve="next", noise_std=None)
+        meta = replace(self.meta, contact_point="known", reference_curve=name, noise_std=None)
         kinematics = curve_kinematics(RecordingSet(Path("next experiment"), meta, frame), self.smoothing)[0]
         stride = max(1, curve.time.size // MAX_SAMPLES)
         arrays = {f.name: getattr(kinematics, f.name)[::stride] for f in fields(kinematics) if f.name in STRIDED}
