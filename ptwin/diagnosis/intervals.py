@@ -53,7 +53,7 @@ def profile_interval(
         try:
             if others:
                 solver = LevenbergMarquardt(partial, warm["others"])
-                warm["others"] = solver.run(REFIT, settled=0.5 * SETTLED)
+                warm["others"] = solver.run(REFIT, settled=SETTLED)
             with torch.no_grad():
                 chi_square = partial(warm["others"]).square().sum().item()
         except FitError:

@@ -22,9 +22,10 @@ from ptwin.physics.model import PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
-# A step that lowers χ² (noise units) by less than this ends a fit: 1000× below the unit a Δχ² is read
-# in (an interval's 3.84, the information criterion's margin of 10), where LM spent ~40% of its steps.
-SETTLED = 1e-3
+# A step that lowers the LM cost ½χ² (noise units) by less than this, χ² by less than 1e-3, ends a fit:
+# 1000× below the unit a Δχ² is read in (an interval's 3.84, the information criterion's margin of 10),
+# where LM spent ~40% of its steps.
+SETTLED = 0.5e-3
 
 
 @dataclass
@@ -90,13 +91,13 @@ def fit_physics(
     model: ForceModel, samples: Samples, index: torch.Tensor, iterations: int = 60, tolerance: float = 1e-10
 ) -> PhysicsFit:
     """Fit the free parameters of ``model`` (K and its terms; frozen ones stay) to ``samples[index]`` by LM,
-    until a step lowers the cost by less than ``tolerance`` (relative) or χ² by less than ``SETTLED``.
+    until a step lowers the cost by less than ``tolerance`` (relative) or ``SETTLED``.
 
     Raises ``FitError`` (the reason in words) when the model cannot be evaluated or linearised.
     """
     vector, residual = scaled_residual(model, samples, index)
     solver = LevenbergMarquardt(residual, vector.get())
-    theta = solver.run(iterations, tolerance, settled=0.5 * SETTLED)  # the cost is χ²/2
+    theta = solver.run(iterations, tolerance, settled=SETTLED)
     vector.set(theta)
     jacobian, r = solver.checked_linearise(theta)
     cov = covariance(jacobian, r) * samples.noise_inflation
