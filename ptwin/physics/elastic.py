@@ -74,7 +74,7 @@ class ReferenceCurve(nn.Module):
             curve=torch.zeros(n, dtype=torch.long, device=time.device),
             in_contact=torch.ones(n, dtype=torch.bool, device=time.device),
             noise_floor=torch.zeros_like(time),
-            curve_ids=(self.curve,),
+            curve_ids=(f"{self.curve}'s depth nodes",),  # what an error names: nodes, not the curve's samples
         )
 
     def bracket(self, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
