@@ -1,6 +1,6 @@
 """make discover-bench: the diagnosis on recording sets with known concealed effects.
 
-Four suites, each a table:
+Four suites of its own, each a table, then the shared development sets (``bench/bench_sets.py``):
 
 - ``original``: sets hiding each vocabulary term at two magnitudes, two pairs, null sets
   of three geometries and one effect outside the vocabulary (stiff cantilever, five
@@ -37,6 +37,7 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
+from bench.bench_sets import print_sets, run_sets
 from ptwin.app import register, typed
 from ptwin.data.recordings import write_recordings
 from ptwin.pipeline.run import run
@@ -241,7 +242,7 @@ def print_loop(rows: list[tuple]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--suite", choices=[*SUITES, "all"], default="all")
+    parser.add_argument("--suite", choices=[*SUITES, "bench-sets", "all"], default="all")
     parser.add_argument("--samples", type=int, default=1000, help="samples per curve (where not set by rate)")
     parser.add_argument("--pgd", default="default", help="PGD preset")
     parser.add_argument("--only", nargs="*", help="run only the cases whose name contains one of these")
@@ -250,7 +251,7 @@ def main() -> None:
     register()
     cache = os.environ.get("PTWIN_CACHE", str(ROOT / ".cache" / "ptwin"))
     overrides = [f"pgd={args.pgd}", f"cache_dir={cache}"]
-    for suite in SUITES if args.suite == "all" else [args.suite]:
+    for suite in SUITES if args.suite == "all" else [s for s in SUITES if s == args.suite]:
         cases = [c for c in SUITES[suite] if not args.only or any(word in c.name for word in args.only)]
         rows = []
         with tempfile.TemporaryDirectory() as scratch:
@@ -268,6 +269,11 @@ def main() -> None:
             print_loop(rows)
         else:
             print_table(f"{suite} suite", rows)
+    if args.suite in ("bench-sets", "all"):
+        with tempfile.TemporaryDirectory() as scratch:
+            shared = run_sets(overrides, Path(scratch), args.only)
+        if shared:
+            print_sets(shared)
 
 
 if __name__ == "__main__":

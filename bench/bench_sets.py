@@ -1,0 +1,150 @@
+"""The shared development sets (``../shared/bench-sets/``): data ptwin did not write, graded by their README.
+
+Each folder holds ``data/`` (a recording set) and ``truth.yaml`` (what is concealed and what a right
+diagnosis says). Grading, as the sets' README states it:
+
+- ``none``: no mismatch detected and nothing left out (a term only in a ``confounded`` group beside the
+  base model is fine; ``unexplained`` is a false alarm);
+- ``terms``: ``left_out`` names exactly the expected terms, and the corrected model's test RMSE is below
+  the base model's;
+- ``unexplained_or_none_wrong``: nothing left out, or ``unexplained: true``, or only terms that are
+  acceptable there;
+
+and for ``none`` and ``terms`` the corrected K within 5 % of the truth (or the set's ``k_tol``).
+
+``python -m bench.bench_sets [--only NAME ...]`` runs them alone; ``make discover-bench`` runs them
+after its own suites. The sets are found beside the repository (``../shared/bench-sets``) or under
+``$PTWIN_BENCH_SETS``; without them the suite says so in one line and is skipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+from hydra import compose, initialize_config_dir
+
+from ptwin.app import register, typed
+from ptwin.pipeline.run import run
+
+ROOT = Path(__file__).resolve().parents[1]
+SETS = Path(os.environ.get("PTWIN_BENCH_SETS", ROOT.parent / "shared" / "bench-sets"))
+
+
+@dataclass
+class Graded:
+    name: str
+    hides: str
+    named: str
+    k_error: float | None  # corrected K over the truth − 1, when the set grades K
+    rmse_gain: float  # base over corrected test RMSE
+    null: bool  # the set conceals nothing
+    false_alarm: bool  # a null on which something was named or a mismatch declared
+    seconds: float
+    right: bool
+    why: str  # what was wrong, empty when right
+
+
+def grade(truth: dict, d: dict) -> tuple[bool, str, float | None]:
+    """(right, why not, K error) of one diagnosis against its ``truth.yaml``."""
+    expect = truth["expect"]
+    named = [entry["term"] for entry in d["left_out"]]
+    k_error = d["permeability"]["corrected"] / truth["K"] - 1 if d["permeability"]["corrected"] else None
+    tolerance = expect.get("k_tol", 0.05)
+    if expect["kind"] == "unexplained_or_none_wrong":
+        acceptable = set(expect.get("also_acceptable_terms", []))
+        right = not named or d["unexplained"] or set(named) <= acceptable
+        return right, "" if right else f"named {', '.join(named)}", None
+    problems = []
+    if expect["kind"] == "none":
+        if d["mismatch"]["detected"] or named:
+            problems.append(f"false alarm ({', '.join(named) or ('unexplained' if d['unexplained'] else 'mismatch')})")
+    else:
+        if sorted(named) != sorted(expect["terms"]) or d["unexplained"]:
+            problems.append(f"named {', '.join(named) or 'nothing'}{' (unexplained)' if d['unexplained'] else ''}")
+        elif not d["fit"]["corrected"]["test_rmse"] < d["fit"]["base"]["test_rmse"]:
+            problems.append("corrected test RMSE not below the base model's")
+    if k_error is None or not abs(k_error) <= tolerance:
+        problems.append(f"K off by more than {100 * tolerance:.0f}%")
+    return not problems, "; ".join(problems), k_error
+
+
+def diagnose_set(folder: Path, overrides: list[str], scratch: Path) -> tuple[dict, float]:
+    with initialize_config_dir(config_dir=str(ROOT / "configs"), version_base="1.3"):
+        cfg = compose(config_name="train", overrides=[f"data.path={folder / 'data'}", *overrides])
+    started = time.perf_counter()
+    diagnosis = run(typed(cfg), scratch / folder.name, progress=lambda line: None).diagnosis
+    return diagnosis, time.perf_counter() - started
+
+
+def run_sets(overrides: list[str], scratch: Path, only: list[str] | None = None) -> list[Graded] | None:
+    """Every set graded (None when the sets are not there), a line printed as each finishes."""
+    if not SETS.is_dir():
+        print(f"bench-sets: {SETS} not found (set PTWIN_BENCH_SETS to the folder of the shared sets); skipped")
+        return None
+    rows = []
+    for folder in sorted(p for p in SETS.iterdir() if (p / "truth.yaml").is_file()):
+        if only and not any(word in folder.name for word in only):
+            continue
+        truth = yaml.safe_load((folder / "truth.yaml").read_text())
+        d, seconds = diagnose_set(folder, overrides, scratch)
+        right, why, k_error = grade(truth, d)
+        named = " + ".join(f"{e['term']} ({e['confidence']})" for e in d["left_out"]) or "-"
+        if d["unexplained"]:
+            named = f"unexplained{'' if named == '-' else ' [' + named + ']'}"
+        base, corrected = d["fit"]["base"]["test_rmse"], d["fit"]["corrected"]["test_rmse"]
+        null = truth["expect"]["kind"] == "none"
+        rows.append(
+            Graded(
+                name=folder.name,
+                hides=" + ".join(truth.get("effects") or {}) or "-",
+                named=named,
+                k_error=k_error,
+                rmse_gain=base / corrected if base and corrected else float("nan"),
+                null=null,
+                false_alarm=null and (d["mismatch"]["detected"] or bool(d["left_out"])),
+                seconds=seconds,
+                right=right,
+                why=why,
+            )
+        )
+        print(f"bench-sets: {folder.name}: {named} ({'right' if right else 'WRONG: ' + why}, {seconds:.1f} s)")
+    return rows
+
+
+def print_sets(rows: list[Graded]) -> None:
+    print("\nshared bench-sets (independent simulator, real noise where the set says so)")
+    print(f"{'set':<34s} {'concealed':<48s} {'named (confidence)':<52s} {'K %':>8s} {'gain':>6s} {'s':>5s}")
+    for r in rows:
+        k = "   –" if r.k_error is None else f"{100 * r.k_error:8.2f}"
+        verdict = "right" if r.right else f"WRONG ({r.why})"
+        print(
+            f"{r.name:<34s} {r.hides:<48.48s} {r.named:<52.52s} {k:>8s} {r.rmse_gain:6.2f} {r.seconds:5.1f} {verdict}"
+        )
+    nulls = [r for r in rows if r.null]
+    print(f"{sum(r.right for r in rows)}/{len(rows)} sets right")
+    print(f"false alarms on the sets that conceal nothing: {sum(r.false_alarm for r in nulls)}/{len(nulls)}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pgd", default="default", help="PGD preset")
+    parser.add_argument("--only", nargs="*", help="run only the sets whose name contains one of these")
+    args = parser.parse_args()
+    warnings.filterwarnings("ignore", category=RuntimeWarning)
+    register()
+    cache = os.environ.get("PTWIN_CACHE", str(ROOT / ".cache" / "ptwin"))
+    with tempfile.TemporaryDirectory() as scratch:
+        rows = run_sets([f"pgd={args.pgd}", f"cache_dir={cache}"], Path(scratch), args.only)
+    if rows:
+        print_sets(rows)
+
+
+if __name__ == "__main__":
+    main()
