@@ -1,14 +1,66 @@
-"""The noise model against known truth: AR(1) noise of given std and correlation."""
+"""The noise model against known truth: white + AR(1) noise of given std and correlation."""
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from ptwin.data.noise import BASELINE, SECOND_DIFFERENCES, ar1_inflation, baseline_noise, curve_noise, pooled
-from ptwin.synth.simulator import correlated_noise
+from ptwin.data.kinematics import curve_kinematics
+from ptwin.data.noise import (
+    BASELINE,
+    SECOND_DIFFERENCES,
+    ar1_inflation,
+    baseline_noise,
+    curve_noise,
+    detrended_lag_sums,
+    model_inflation,
+    pooled,
+)
+from ptwin.data.recordings import load_recordings, write_recordings
+from ptwin.synth.simulator import Experiment, correlated_noise, simulate
 
 
 def ar1(lag1, size=20000, std=1.3e-11, seed=0):
     return correlated_noise(np.random.default_rng(seed), size, std, lag1)
+
+
+def mixed(rng, size, correlation_samples, white_share):
+    """Unit-variance noise: a white part and an AR(1) part of the given correlation time (samples)."""
+    memory = np.exp(-1.0 / correlation_samples)
+    return np.sqrt(1 - white_share) * correlated_noise(rng, size, 1.0, memory) + np.sqrt(white_share) * rng.normal(
+        size=size
+    )
+
+
+def detrended(values):
+    index = np.arange(values.size)
+    return values - np.polyval(np.polyfit(index, values, 1), index)
+
+
+def test_the_expected_autocorrelation_of_a_detrended_record_is_what_records_show():
+    # Closed form (diagonal sums of M·T·M) against 4000 simulated 60-sample records of AR(1) noise, φ = 0.9:
+    # removing a line takes most of the correlation out of a record this short, and the formula says how much.
+    rng = np.random.default_rng(3)
+    records = [detrended(correlated_noise(rng, 60, 1.0, 0.9)) for _ in range(4000)]
+    simulated = [np.mean([np.sum(r[: 60 - k] * r[k:]) for r in records]) for k in range(6)]
+    expected = detrended_lag_sums(60, 0.9, 5)
+    assert expected == pytest.approx(simulated, rel=0.06, abs=0.3)
+    assert expected[0] < 0.8 * 60  # the naive expectation (60·φ^0) is far off
+    assert detrended_lag_sums(60, 0.0, 0)[0] == pytest.approx(58.0)  # white: n − 2, the line's two parameters
+
+
+def test_short_baselines_together_give_the_inflation_their_records_alone_would_underestimate():
+    # Eight baselines of 150 samples of noise 40% white, 60% AR(1) of 20 samples (the shared AR sets' noise):
+    # the lag-1 correlation alone (an AR(1) summary) predicts κ² ≈ 3.5; the truth at 50-sample blocks is 15.6.
+    truth = model_inflation(0.6, np.exp(-1 / 20), 50)
+    estimates = []
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        time, z = np.arange(150) / 2000.0, np.linspace(-1e-6, -0.2e-6, 150)
+        curves = [baseline_noise(time, z, 1e-10 * mixed(rng, 150, 20, 0.4), 50) for _ in range(8)]
+        estimates.append(pooled(curves, [1] * 8, [5e-4] * 8, 50).inflation)
+    assert np.median(estimates) == pytest.approx(truth, rel=0.35)
+    assert min(estimates) > 2 * ar1_inflation(0.6 * np.exp(-1 / 20), 50)
 
 
 @pytest.mark.parametrize("lag1", [0.0, 0.3, 0.7])
@@ -18,7 +70,7 @@ def test_baseline_noise_recovers_std_correlation_and_block_inflation(lag1):
     force = ar1(lag1) + 3e-10 + 4e-4 * z  # an offset and a tilt: not noise
     model = baseline_noise(time, z, force, block=50)
     assert model.source == BASELINE
-    assert model.std == pytest.approx(1.3e-11, rel=0.03)
+    assert model.std == pytest.approx(1.3e-11, rel=0.03, abs=0)
     assert model.lag1 == pytest.approx(lag1, abs=0.03)
     assert model.inflation == pytest.approx(ar1_inflation(lag1, 50), rel=0.15)
     expected_time = -(np.log(lag1) ** -1) / 2000.0 if lag1 else 0.0
@@ -38,7 +90,7 @@ def test_without_a_baseline_the_std_comes_from_second_differences_and_white_is_a
     force = 5e-7 * time**1.5 + ar1(0.0, 4000, 3e-10)
     model = curve_noise(time, time - 0.01, force, time < 0.01, block=50)  # 40 baseline samples: too few
     assert model.source == SECOND_DIFFERENCES
-    assert model.std == pytest.approx(3e-10, rel=0.08)
+    assert model.std == pytest.approx(3e-10, rel=0.08, abs=0)
     assert model.inflation == 1.0
 
 
@@ -46,8 +98,22 @@ def test_the_set_pools_correlation_from_the_curves_that_measured_it():
     time = np.arange(3000) / 2000.0
     z = np.linspace(-2e-6, -0.5e-6, 3000)
     measured = [baseline_noise(time, z, ar1(0.4, 3000, seed=s), 50) for s in range(3)]
-    guessed = curve_noise(time, z, ar1(0.0, 3000), np.zeros(3000, bool), 50)
+    guessed = curve_noise(time, z, ar1(0.4, 3000, seed=9), np.zeros(3000, bool), 50)  # the same instrument
     set_noise = pooled([*measured, guessed], [1, 1, 1, 1], [5e-4] * 4)
     assert set_noise.source == BASELINE
-    assert set_noise.inflation == pytest.approx(np.median([m.inflation for m in measured]))
-    assert set_noise.inflation > 1.5  # correlated noise counts for fewer samples
+    assert set_noise.inflation == pytest.approx(ar1_inflation(0.4, 50), rel=0.15)
+    assert set_noise.blocks == pytest.approx(3 * 3000 / 50)
+    # The curve without a baseline: σ from second differences, corrected for the set's correlation
+    # (they read σ·√(1 − φ) of AR(1) noise: ~23% low at φ = 0.4, so the set's σ would be ~6% low).
+    assert set_noise.std == pytest.approx(1.3e-11, rel=0.04, abs=0)
+
+
+def test_a_noise_std_written_in_meta_yaml_replaces_sigma_and_keeps_the_measured_correlation(tmp_path):
+    experiment = Experiment(samples=1500, z_start=-1.0e-6, noise_correlation=0.6, noise_std=2.5e-10)
+    meta, curves = simulate(experiment)
+    write_recordings(tmp_path, replace(meta, noise_std=3.0e-10), curves)
+    kinematics = curve_kinematics(load_recordings(tmp_path))
+    noise = pooled([c.noise for c in kinematics], [1] * len(kinematics), [1e-3] * len(kinematics))
+    assert noise.std == 3.0e-10
+    assert "meta.yaml" in noise.source and BASELINE in noise.source
+    assert noise.inflation == pytest.approx(ar1_inflation(0.6, 50), rel=0.25)

@@ -4,9 +4,11 @@
 - ``U = dw/dt`` by local linear regression over a centred window of ``smoothing``
   (fraction of the approach's samples, ≈5%): a raw finite difference (paper eq. 7) turns
   force noise σ/k_s into a velocity noise ~σ/(k_s Δt) that invents rate effects. Windows
-  stay within a segment (approach, hold, retract), so the ramp/hold corner is not smeared;
-  still, the tip's stop at the corner is faster than a window, so the first half-window of
-  a hold is left out of the fits (its velocity is not resolved), counted in ``settling``.
+  stay within a segment (approach, hold, retract) and stay centred, shrinking towards a
+  segment's ends: the tip stops at the ramp/hold corner within a few samples, and a
+  window reaching past it would smear the stop over the hold's first milliseconds, where
+  a fast relaxation (a pore pressure draining in 5–20 ms) is all there is to see. Every
+  sample of a hold is fitted.
 - Fits use the approach and the hold; a retract is kept but left out (adhesion and
   unloading are not in the vocabulary).
 - The noise of each curve (``ptwin.data.noise``): measured on its pre-contact baseline
@@ -15,18 +17,20 @@
   z < 0, e.g. cantilever drag) is measured and kept, never subtracted: it is evidence.
 - Estimated contact (``contact_point: estimate``): each curve's contact point is estimated
   and its baseline offset and tilt removed (``ptwin.data.contact``); z then counts from
-  the estimate, which the fit refines (``ContactNuisance``).
+  the estimate, which the fit refines (``ContactNuisance``). Where the curves' levels are one
+  common level plus drag (b·speed within their standard errors), only the common level is
+  removed: the drag stays in the force, as evidence.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
-from ptwin.data.contact import Baseline, NoBaseline, estimate_baseline
-from ptwin.data.noise import NoiseModel, curve_noise
+from ptwin.data.contact import Baseline, NoBaseline, estimate_baseline, levels_with_speed
+from ptwin.data.noise import NoiseModel, curve_noise, with_std
 from ptwin.data.recordings import SEGMENTS, RecordingError, RecordingSet
 
 
@@ -43,14 +47,13 @@ class CurveKinematics:
     contact_radius: np.ndarray  # R [m]
     velocity: np.ndarray  # U [m/s]
     height: np.ndarray  # H [m]
-    in_contact: np.ndarray  # bool: samples used in fits (z ≥ 0 and w > 0, not on a retract nor settling)
+    in_contact: np.ndarray  # bool: samples used in fits (z ≥ 0 and w > 0, not on a retract)
     segment: np.ndarray  # int: index into SEGMENTS (0 approach, 1 hold, 2 retract)
     base_speeds: np.ndarray  # each sample's base speed [m/s] (0 in a hold)
     noise: NoiseModel
     baseline_offset: float | None  # pre-contact force [N]: its mean (known contact), the removed line's at
     # contact (estimated contact), None without pre-contact samples
     baseline: Baseline | None  # the estimated contact and removed baseline (contact_point: estimate)
-    settling: int = 0  # samples at the start of holds left out of fits (velocity not resolved there)
 
     @property
     def noise_floor(self) -> float:
@@ -67,17 +70,20 @@ def contact_radius(depth, probe_radius: float):
 
 def window_line(x: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray, at: np.ndarray):
     """Least-squares lines through samples lo[i]..hi[i] (inclusive) of sorted x:
-    (value at ``at[i]``, slope) for every window i. O(N + windows), by cumulative sums."""
+    (value at ``at[i]``, slope) for every window i. O(N + windows), by cumulative sums. ``y`` (N, …)
+    may carry trailing axes: one line per column."""
     shifted = x - x[0]
+    column = (slice(None),) + (None,) * (y.ndim - 1)  # y may carry trailing axes (replicates): x's sums broadcast
 
     def window_sum(values):
-        cumulative = np.concatenate([[0.0], np.cumsum(values)])
+        cumulative = np.concatenate([np.zeros((1, *values.shape[1:])), np.cumsum(values, axis=0)])
         return cumulative[hi + 1] - cumulative[lo]
 
-    count = (hi - lo + 1).astype(float)
-    sx, sy, sxx, sxy = window_sum(shifted), window_sum(y), window_sum(shifted * shifted), window_sum(shifted * y)
+    count = (hi - lo + 1).astype(float)[column]
+    sx, sxx = window_sum(shifted)[column], window_sum(shifted * shifted)[column]
+    sy, sxy = window_sum(y), window_sum(shifted[column] * y)
     slope = (sxy - sx * sy / count) / (sxx - sx * sx / count)
-    value = sy / count + slope * (at - x[0] - sx / count)
+    value = sy / count + slope * ((at - x[0])[column] - sx / count)
     return value, slope
 
 
@@ -96,12 +102,12 @@ def segmented_derivative(time: np.ndarray, values: np.ndarray, window: int, segm
 def smoothed_derivative(time: np.ndarray, values: np.ndarray, window: int) -> np.ndarray:
     """Slope of a least-squares line over a centred window of ``window`` samples.
 
-    Works on non-uniform time; the window shrinks (stays centred where possible) at
-    the ends.
+    Works on non-uniform time; towards the ends the window shrinks and stays centred (one
+    neighbour at the very ends), so a corner just past an end cannot bias the slope there.
     """
     n = len(values)
     index = np.arange(n)
-    half = max(1, window // 2)
+    half = np.clip(np.minimum(index, n - 1 - index), 1, max(1, window // 2))
     lo, hi = np.clip(index - half, 0, n - 1), np.clip(index + half, 0, n - 1)
     return window_line(time, values, lo, hi, time)[1]
 
@@ -110,25 +116,24 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
     """Kinematics of every curve of a recording set, in file order; ``block``: the block length [samples]
     of the noise model's variance inflation (the whiteness test's)."""
     meta = recordings.meta
+    rows = {curve_id: recordings.curve(curve_id) for curve_id in recordings.curve_ids}
+    baselines = _estimated_baselines(recordings, rows) if meta.contact_point == "estimate" else {}
     result = []
-    for curve_id in recordings.curve_ids:
-        rows: pd.DataFrame = recordings.curve(curve_id)
-        time, z, force = (rows[c].to_numpy(dtype=np.float64) for c in ("time", "z", "force"))
-        segment = _segment_codes(rows)
+    for curve_id, curve in rows.items():
+        time, z, force = (curve[c].to_numpy(dtype=np.float64) for c in ("time", "z", "force"))
+        segment = _segment_codes(curve)
         approach = segment == 0
-        baseline = None
-        if meta.contact_point == "estimate":
-            baseline = _estimated_baseline(recordings, curve_id, z[approach], force[approach])
+        baseline = baselines.get(curve_id)
+        if baseline is not None:
             z, force = baseline.remove(z, force)
         depth = z - force / meta.spring_constant
         window = max(5, int(round(smoothing * approach.sum())))  # the approach's: a long hold would widen it
         pre_contact = (z < 0) & approach
         noise = curve_noise(time, z, force, approach & (z <= 0.25 * min(z[0], 0.0)), block)
         if meta.noise_std:
-            noise = replace(noise, std=meta.noise_std, source=f"noise_std of meta.yaml; correlation: {noise.source}")
+            noise = with_std(noise, meta.noise_std, "noise_std of meta.yaml")
         offset = baseline.offset if baseline else (float(force[pre_contact].mean()) if pre_contact.any() else None)
-        speeds = rows["base_speed"].to_numpy(dtype=np.float64)
-        settling = _settling(segment, window // 2)
+        speeds = curve["base_speed"].to_numpy(dtype=np.float64)
         result.append(
             CurveKinematics(
                 curve=curve_id,
@@ -140,32 +145,38 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
                 contact_radius=contact_radius(depth, meta.probe_radius),
                 velocity=segmented_derivative(time, depth, window, segment),
                 height=meta.sample_thickness - depth,
-                in_contact=(z >= 0) & (depth > 0) & (segment < SEGMENTS.index("retract")) & ~settling,
+                in_contact=(z >= 0) & (depth > 0) & (segment < SEGMENTS.index("retract")),
                 segment=segment,
                 base_speeds=speeds,
                 noise=noise,
                 baseline_offset=offset,
                 baseline=baseline,
-                settling=int(settling.sum()),
             )
         )
     return result
-
-
-def _settling(segment: np.ndarray, samples: int) -> np.ndarray:
-    """The first ``samples`` of every hold."""
-    hold = segment == SEGMENTS.index("hold")
-    starts = np.flatnonzero(hold & ~np.r_[False, hold[:-1]])
-    settling = np.zeros_like(hold)
-    for start in starts:
-        settling[start : start + samples] = True
-    return settling & hold
 
 
 def _segment_codes(rows: pd.DataFrame) -> np.ndarray:
     if "segment" not in rows:
         return np.zeros(len(rows), dtype=np.int64)
     return rows["segment"].map(SEGMENTS.index).to_numpy(dtype=np.int64)
+
+
+def _estimated_baselines(recordings: RecordingSet, rows: dict[str, pd.DataFrame]) -> dict[str, Baseline]:
+    """Each curve's estimated contact and baseline; where the levels are one common level plus drag
+    (``levels_with_speed``), only the common level is removed, so the drag stays in the force."""
+    baselines, speeds = {}, []
+    for curve_id, curve in rows.items():
+        approach = _segment_codes(curve) == 0
+        z, force = (curve[c].to_numpy(dtype=np.float64)[approach] for c in ("z", "force"))
+        baselines[curve_id] = _estimated_baseline(recordings, curve_id, z, force)
+        speeds.append(float(curve["base_speed"].to_numpy()[approach][0]))
+    levels = np.array([b.level for b in baselines.values()])
+    stds = np.array([b.level_std for b in baselines.values()])
+    fit = levels_with_speed(levels, stds, np.array(speeds))
+    if fit is None or not fit.consistent:
+        return baselines
+    return {curve_id: b.with_offset(fit.common) for curve_id, b in baselines.items()}
 
 
 def _estimated_baseline(recordings: RecordingSet, curve_id: str, z: np.ndarray, force: np.ndarray) -> Baseline:

@@ -2,35 +2,51 @@
 
 A real cantilever's noise is correlated (thermal motion, 1/f, drift), so its std alone
 overstates every statistic that averages residuals: a smooth misfit averages down as
-σ²/n only for white noise. The model kept here is
+σ²/n only for white noise. The model kept here is white noise plus an AR(1) part,
 
-- ``std`` σ [N] and the lag-1 autocorrelation φ (an AR(1) summary; ``correlation_time``
-  τ = −Δt/ln φ, 0 when φ ≤ 0), and
+    ρ_k = c · φ^k   (k ≥ 1; c the AR part's share of the variance, φ its memory),
+
+which is what real AFM noise looks like at the lags that matter (real-noise.md: a white
+floor under thermal correlation), with
+
+- ``std`` σ [N], ``lag1`` ρ₁ = cφ, ``correlation_time`` τ = −Δt/ln φ (0 for white), and
 - ``inflation`` κ²: the variance of means of ``block`` consecutive samples, in units of
   the white expectation σ²/block (1 for white noise, > 1 for correlated noise).
 
 κ² is what the statistics use (whiteness ÷ κ², n/κ² effective samples in the information
-criteria, parameter variances × κ²). It is the larger of the block variance measured
-directly (it sees 1/f drift, but is noisy with few blocks) and the AR(1) prediction from
-φ (precise from a few hundred samples, blind to drift), and never below 1: the noise
-model never makes the data more informative than white noise would.
+criteria, parameter variances × κ²). It is the larger of the model's prediction and the
+block variance measured directly where a baseline holds four blocks (that sees 1/f drift
+the AR(1) part cannot), and never below 1: the noise model never makes the data more
+informative than white noise would.
 
 Where a curve has a pre-contact baseline of at least ``MIN_BASELINE`` samples, the noise
 is what is left there after a straight line in z is removed (real-noise.md's recipe).
-Otherwise the std comes from second differences (robust, exact for white noise under a
-smooth signal) and the correlation of the other curves' baselines is used, if any.
+Removing the line biases a short record's autocorrelation low (a 116-sample baseline of
+20-sample correlation loses most of it), so (c, φ) are fitted to the *expected* sample
+autocorrelation of a detrended record of each length, computed exactly, and the set's
+correlation is fitted on every curve's baseline at once (``pooled``). Without a baseline
+σ comes from second differences, corrected for the set's correlation where it is known.
+A ``noise_std`` a lab wrote down replaces σ only: the correlation is still measured.
+
+``blocks`` ν counts the independent block means κ² rests on (baseline samples / block):
+the whiteness test's null distribution depends on it (``ptwin.diagnosis.locate``).
 """
 
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
+import scipy.fft
+import scipy.signal
 
 MIN_BASELINE = 100  # samples of pre-contact baseline for a measured noise model
 BASELINE = "pre-contact baseline"
 SECOND_DIFFERENCES = "second differences of the curve (no baseline long enough)"
+_MEMORIES = np.exp(-1.0 / np.geomspace(0.3, 300.0, 48))  # φ grid: correlation times 0.3–300 samples
+_SHARES = np.linspace(-0.5, 1.0, 61)  # c grid (anti-correlated cell noise has c·φ < 0)
 
 
 @dataclass(frozen=True)
@@ -38,32 +54,135 @@ class NoiseModel:
     """The noise of one curve, or of a whole recording set (``pooled``)."""
 
     std: float  # σ [N]
-    lag1: float  # φ, lag-1 autocorrelation
+    lag1: float  # ρ₁ = c·φ, lag-1 autocorrelation
     inflation: float  # κ² ≥ 1: block-mean variance over the white expectation
-    correlation_time: float  # [s], 0 for white or anti-correlated noise
+    correlation_time: float  # [s] of the AR(1) part, 0 for white noise
     source: str  # where it was measured
     samples: int  # how many samples it was measured on
+    share: float = 0.0  # c: the AR(1) part's share of the variance
+    memory: float = 0.0  # φ: the AR(1) part's lag-1 correlation
+    blocks: float = math.inf  # ν: independent block means the correlation rests on (inf: assumed white)
+    record: np.ndarray | None = field(default=None, compare=False, repr=False)  # the detrended baseline [N]
+
+    def as_dict(self) -> dict:
+        """Every number of the model (results.json), without the baseline record."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "record"}
+
+    def autocorrelation(self, lags: np.ndarray) -> np.ndarray:
+        """ρ_k of the model at ``lags`` (ρ₀ = 1)."""
+        lags = np.asarray(lags)
+        return np.where(lags == 0, 1.0, self.share * self.memory ** np.abs(lags))
+
+
+def model_inflation(share: float, memory: float, block: int) -> float:
+    """κ² of white + AR(1) noise (ρ_k = c·φ^k) for means of ``block`` samples: 1 + 2c Σ_k (1 − k/B) φ^k."""
+    k = np.arange(1, block)
+    return float(1.0 + 2.0 * share * np.sum((1.0 - k / block) * memory**k))
 
 
 def ar1_inflation(lag1: float, block: int) -> float:
-    """κ² of AR(1) noise for means of ``block`` samples: 1 + 2 Σ_k (1 − k/B) φ^k."""
-    k = np.arange(1, block)
-    return float(1.0 + 2.0 * np.sum((1.0 - k / block) * lag1**k))
+    """κ² of pure AR(1) noise (c = 1, φ = ``lag1``)."""
+    return model_inflation(1.0, lag1, block)
 
 
-def block_inflation(noise: np.ndarray, block: int) -> float:
-    """κ² measured: variance of the means of every ``block`` consecutive samples (overlapping
-    windows, for a steadier estimate) times ``block``, over the variance."""
+def block_inflation(noise: np.ndarray, block: int) -> float | None:
+    """κ² measured: variance of the means of every ``block`` consecutive samples (overlapping windows,
+    for a steadier estimate) times ``block``, over the variance; None on fewer than four blocks."""
     if noise.size < 4 * block:
-        return 1.0
+        return None
     cumulative = np.concatenate([[0.0], np.cumsum(noise)])
     means = (cumulative[block:] - cumulative[:-block]) / block
     return float(block * np.mean(means**2) / np.mean(noise**2))
 
 
-def correlation_time(lag1: float, step: float) -> float:
+def correlation_time(memory: float, step: float) -> float:
     """τ [s] of an AR(1) with lag-1 correlation φ at sampling step Δt: φ = exp(−Δt/τ)."""
-    return -step / math.log(lag1) if 0.0 < lag1 < 1.0 else 0.0
+    return -step / math.log(memory) if 0.0 < memory < 1.0 else 0.0
+
+
+def _apply_ar(columns: np.ndarray, memory: float) -> np.ndarray:
+    """T·Q for the AR(1) correlation matrix T_ij = φ^|i−j| (a forward and a backward filter)."""
+    if memory == 0.0:
+        return columns
+    forward = scipy.signal.lfilter([1.0], [1.0, -memory], columns, axis=0)
+    backward = scipy.signal.lfilter([1.0], [1.0, -memory], columns[::-1], axis=0)[::-1]
+    return forward + backward - columns
+
+
+def _lagged(a: np.ndarray, b: np.ndarray, lags: int) -> np.ndarray:
+    """Σ_t a[t, …]·b[t + k, …] for k = 0 … lags (summed over the first axis, by FFT), shape (lags + 1, …)."""
+    n = a.shape[0]
+    size = scipy.fft.next_fast_len(2 * n)
+    product = np.conj(np.fft.rfft(a, size, axis=0)) * np.fft.rfft(b, size, axis=0)
+    return np.fft.irfft(product, size, axis=0)[: lags + 1]
+
+
+@functools.lru_cache(maxsize=256)
+def _detrended_grid(length: int, lags: int) -> tuple[np.ndarray, np.ndarray]:
+    """``detrended_lag_sums`` of white noise, (lags + 1,), and of AR(1) noise at every memory of the
+    grid, (memories, lags + 1): baselines of one length share them (a map's spots, a set's curves)."""
+    index = np.arange(length, dtype=np.float64)
+    q, _ = np.linalg.qr(np.column_stack([np.ones(length), index - index.mean()]))
+    k = np.arange(lags + 1)
+    raw = (length - k)[None, :] * _MEMORIES[:, None] ** k[None, :]
+    tq = np.stack([_apply_ar(q, memory) for memory in _MEMORIES], axis=2)  # (length, 2, memories)
+    core = np.einsum("ti,tjm->ijm", q, tq)  # Qᵀ·T·Q for every memory
+    qcore = np.einsum("ti,ijm->tjm", q, core)
+    qq = q[:, :, None]
+    ar = raw - (_lagged(qq, tq, lags) + _lagged(tq, qq, lags) - _lagged(qcore, qq, lags)).sum(axis=1).T
+    white = (k == 0) * float(length) - _lagged(q, q, lags).sum(axis=1)  # M·I·M = M
+    return white, ar
+
+
+def detrended_lag_sums(length: int, memory: float, lags: int) -> np.ndarray:
+    """E[Σ_t e_t e_{t+k}], k = 0 … ``lags``, for unit-variance AR(1) noise of memory φ (0: white) after a
+    least-squares line is removed from a record of ``length`` samples: the diagonal sums of M·T·M,
+    M = I − QQᵀ, in O(length · log length)."""
+    index = np.arange(length, dtype=np.float64)
+    q, _ = np.linalg.qr(np.column_stack([np.ones(length), index - index.mean()]))
+    tq = _apply_ar(q, memory)
+    k = np.arange(lags + 1)
+    raw = (length - k) * memory**k if memory else (k == 0) * float(length)
+    qcore = q @ (q.T @ tq)
+    return raw - (_lagged(q, tq, lags) + _lagged(tq, q, lags) - _lagged(qcore, q, lags)).sum(axis=1)
+
+
+def fit_correlation(records: list[np.ndarray], lags: int) -> tuple[float, float, float]:
+    """(c, φ, σ) of white + AR(1) noise fitted to the pooled sample autocorrelation of detrended
+    ``records`` at lags 1 … ``lags``, against its expectation for records of those lengths (so the
+    detrending's bias is modelled, not ignored); σ is unbiased under the fitted model."""
+    observed = sum(_lagged(r, r, lags) for r in records)
+    grids = [_detrended_grid(r.size, lags) for r in records]
+    white = sum(g[0] for g in grids)
+    ar = sum(g[1] for g in grids)  # (memories, lags + 1)
+    shares = _SHARES[:, None, None]
+    expected = (1.0 - shares) * white[None, None, :] + shares * ar[None, :, :]  # (shares, memories, lags + 1)
+    misfit = np.sum((expected[..., 1:] / expected[..., :1] - observed[1:] / observed[0]) ** 2, axis=2)
+    i, j = np.unravel_index(int(np.argmin(misfit)), misfit.shape)
+    return float(_SHARES[i]), float(_MEMORIES[j]), math.sqrt(float(observed[0] / expected[i, j, 0]))
+
+
+def _lags(records: list[np.ndarray], block: int) -> int:
+    return int(max(2, min(block, min(r.size for r in records) // 3)))
+
+
+def _from_records(records: list[np.ndarray], block: int, step: float, source: str) -> NoiseModel:
+    share, memory, std = fit_correlation(records, _lags(records, block))
+    measured = [m for m in (block_inflation(r, block) for r in records) if m is not None]
+    inflation = max(1.0, model_inflation(share, memory, block), float(np.median(measured)) if measured else 1.0)
+    total = sum(r.size for r in records)
+    return NoiseModel(
+        std=std,
+        lag1=share * memory,
+        inflation=inflation,
+        correlation_time=correlation_time(memory, step) if share > 0 else 0.0,
+        source=source,
+        samples=total,
+        share=share,
+        memory=memory,
+        blocks=total / block,
+        record=records[0] if len(records) == 1 else None,
+    )
 
 
 def baseline_noise(time: np.ndarray, z: np.ndarray, force: np.ndarray, block: int) -> NoiseModel | None:
@@ -76,13 +195,9 @@ def baseline_noise(time: np.ndarray, z: np.ndarray, force: np.ndarray, block: in
     design = np.column_stack([np.ones_like(z), z - z.mean()])
     coefficients, *_ = np.linalg.lstsq(design, force, rcond=None)
     noise = force - design @ coefficients
-    std = float(np.sqrt(np.mean(noise**2) * noise.size / (noise.size - 2)))
-    if std == 0.0:
+    if not np.any(noise):
         return None
-    lag1 = float(np.clip(np.mean(noise[1:] * noise[:-1]) / np.mean(noise**2), -0.99, 0.99))
-    inflation = max(1.0, ar1_inflation(lag1, block), block_inflation(noise, block))
-    step = float(np.median(np.diff(time)))
-    return NoiseModel(std, lag1, inflation, correlation_time(lag1, step), BASELINE, int(force.size))
+    return _from_records([noise], block, float(np.median(np.diff(time))), BASELINE)
 
 
 def second_difference_std(force: np.ndarray) -> float:
@@ -93,27 +208,34 @@ def second_difference_std(force: np.ndarray) -> float:
 
 def curve_noise(time, z, force, baseline: np.ndarray, block: int) -> NoiseModel:
     """The noise of one curve: measured on its ``baseline`` samples (bool mask) if long enough,
-    else σ from second differences of the whole curve, correlation unknown (κ² = 1 until pooled)."""
+    else σ from second differences of the whole curve, correlation unknown (white until pooled)."""
     measured = baseline_noise(time[baseline], z[baseline], force[baseline], block)
     if measured is not None:
         return measured
     return NoiseModel(second_difference_std(force), 0.0, 1.0, 0.0, SECOND_DIFFERENCES, int(force.size))
 
 
-def pooled(models: list[NoiseModel], weights: list[float], steps: list[float]) -> NoiseModel:
-    """The set's noise: σ averaged with ``weights`` (fitted samples per curve); correlation (φ, κ²) the
-    median over the curves with a measured baseline (one instrument, one sample), else white."""
-    std = float(np.average([m.std for m in models], weights=weights))
-    measured = [m for m in models if m.source == BASELINE]
-    if not measured:
+def with_std(model: NoiseModel, std: float, where: str) -> NoiseModel:
+    """``model`` with σ given elsewhere (``where``); the correlation stays what was measured."""
+    return replace(model, std=std, source=f"std from {where}; correlation from the {model.source}")
+
+
+def pooled(models: list[NoiseModel], weights: list[float], steps: list[float], block: int = 50) -> NoiseModel:
+    """The set's noise: σ averaged with ``weights`` (fitted samples per curve); the correlation fitted on
+    every measured baseline at once (one instrument, one sample), else white. A curve whose σ came from
+    second differences has it corrected for that correlation: Var(Δ²e) = σ²(6 − 8ρ₁ + 2ρ₂)."""
+    records = [m.record for m in models if m.record is not None]
+    if not records:
+        std = float(np.average([m.std for m in models], weights=weights))
         return NoiseModel(std, 0.0, 1.0, 0.0, SECOND_DIFFERENCES, sum(m.samples for m in models))
-    lag1 = float(np.median([m.lag1 for m in measured]))
-    inflation = float(np.median([m.inflation for m in measured]))
-    return NoiseModel(
-        std,
-        lag1,
-        inflation,
-        correlation_time(lag1, float(np.median(steps))),
-        BASELINE,
-        sum(m.samples for m in measured),
+    correlation = _from_records(records, block, float(np.median(steps)), models[0].source)
+    rho1, rho2 = correlation.autocorrelation(np.array([1, 2]))
+    factor = math.sqrt(6.0 / (6.0 - 8.0 * rho1 + 2.0 * rho2))
+    stds = [m.std * factor if m.source == SECOND_DIFFERENCES else m.std for m in models]
+    sources = {m.source for m in models if m.record is not None}
+    return replace(
+        correlation,
+        std=float(np.average(stds, weights=weights)),
+        source=sources.pop() if len(sources) == 1 else BASELINE,
+        record=None,
     )

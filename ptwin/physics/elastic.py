@@ -48,8 +48,8 @@ class ReferenceCurve(nn.Module):
         lo = (position - half).clip(0, len(depth) - 3)
         hi = (position + half).clip(lo + 2, len(depth) - 1)
 
-        def local(values):
-            return window_line(depth**1.5, values, lo, hi, grid**1.5)[0]
+        self._window = (depth**1.5, lo, hi, grid**1.5)
+        local = self.smooth
 
         as_tensor = partial(torch.tensor, dtype=torch.float64)
         self.register_buffer("depth_nodes", as_tensor(grid))
@@ -58,6 +58,14 @@ class ReferenceCurve(nn.Module):
         self.register_buffer("velocity", as_tensor(local(reference.velocity[use][order])))
         self.base_speed = reference.base_speed
         self.curve = reference.curve
+        self.noise_std = reference.noise.std  # [N]: what the law inherits of the reference's noise
+        self.samples = depth.size  # the reference's samples the law is read off
+
+    def smooth(self, values: np.ndarray) -> np.ndarray:
+        """Values on the reference's samples (in depth order; (samples, …)) smoothed onto the depth nodes as the
+        law is, before the isotonic step: local lines in w^1.5. Linear in ``values``."""
+        x, lo, hi, at = self._window
+        return window_line(x, values, lo, hi, at)[0]
 
     def node_samples(self, index: torch.Tensor | None = None) -> Samples:
         """The reference curve at the depth nodes (or those indexed by ``index``), as samples of one curve."""

@@ -91,6 +91,11 @@ class Prepared:
     def estimated_contact(self) -> bool:
         return self.make_model.contact_ids is not None
 
+    @property
+    def common_level(self) -> bool:
+        """One common baseline level was removed from every curve (drag, if any, is still in the force)."""
+        return all(c.baseline is not None and c.baseline.common for c in self.curves)
+
 
 def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prepared:
     """Load and check the recordings, print their kinematics, get the cached basis, split."""
@@ -100,7 +105,12 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     _print_kinematics(curves, progress)
     reference = next(c for c in curves if c.curve == meta.reference_curve)
     fitted, notes = _fitted_curves(recordings, curves, reference)
-    noise = pooled([c.noise for c in curves], [max(int(c.in_contact.sum()), 1) for c in curves], _steps(curves))
+    noise = pooled(
+        [c.noise for c in curves],
+        [max(int(c.in_contact.sum()), 1) for c in curves],
+        _steps(curves),
+        settings.diagnosis.block,
+    )
     noise = replace(noise, std=float(np.average([c.noise.std for c in fitted], weights=_counts(fitted))))
     samples = Samples.from_curves(fitted, noise.inflation).to(settings.device)
     basis = cached_basis(settings.pgd, settings.cache_dir, progress)
@@ -128,12 +138,6 @@ def _fitted_curves(recordings: RecordingSet, curves, reference) -> tuple[list[Cu
         )
     deepest = reference.depth[reference.in_contact].max(initial=0.0)
     fitted, notes = [], []
-    settling = [f"{c.curve} {c.settling}" for c in curves if c.settling]
-    if settling:
-        notes.append(
-            f"The first samples of each hold are left out of the fits ({', '.join(settling)}): the tip stops "
-            f"faster than the velocity can be resolved there."
-        )
     for curve in curves:
         if curve is reference:
             continue

@@ -54,8 +54,8 @@ def per_curve_record(fits: dict[str, PhysicsFit], term: str) -> dict:
 def noise_record(curves: list[CurveKinematics], pooled: NoiseModel) -> dict:
     """The noise model of every curve and of the set."""
     return {
-        "set": asdict(pooled),
-        "curves": {c.curve: asdict(c.noise) for c in curves},
+        "set": pooled.as_dict(),
+        "curves": {c.curve: c.noise.as_dict() for c in curves},
     }
 
 
