@@ -11,6 +11,11 @@ its estimate, and the baseline offset and tilt removed from its force.
    w0 where F = c·(w − w0)^1.5 fits the start of the indentation best (the Hertz shape of
    a sphere; a coarse grid then a fine one, c by linear least squares at each w0).
 
+4. The level removed: each curve's own, unless the levels of the set are one common level
+   plus drag on the cantilever (o_i = a + b·v_i within their standard errors, ``levels_with_speed``):
+   then only the common level is removed and the drag stays in the force, where
+   ``cantilever_drag`` can be fitted; free per-curve levels would remove it unseen.
+
 Why not nanite's estimators (``nanite.poc``): its Fréchet-distance guess lands well inside
 contact when the baseline is short against the indentation (1.1 µm into a 4 µm Hertzian
 indent after 1 µm of baseline, which spoilt the baseline line fitted before it), and its
@@ -21,12 +26,18 @@ contact again, jointly with the physics (``ptwin.physics.contact``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
+import scipy.stats
+
+from ptwin.data.noise import fit_correlation, model_inflation
 
 DEPARTURE = 5.0  # robust standard deviations above the first baseline where contact has begun
 SCAN = 101  # candidate contact depths per grid of the refinement
+REJECT = 0.01  # how often levels that are one level plus drag are taken for free per-curve offsets
+MIN_DOF = 2  # degrees of freedom the levels must leave a line to tell drag from offsets
 
 
 @dataclass(frozen=True)
@@ -34,8 +45,15 @@ class Baseline:
     """One curve's estimated contact and the baseline removed from its force."""
 
     contact_z: float  # the file's z at the contact [m]: z − contact_z is the travel past contact
-    offset: float  # the baseline's force at the contact [N]
+    offset: float  # the force removed at the contact [N]: the curve's own level, or the set's common level
     tilt: float  # its slope dF/dz [N/m] (virtual deflection)
+    level: float = math.nan  # the curve's own baseline level at the contact [N]
+    level_std: float = math.nan  # its standard error under the baseline's noise [N]
+    common: bool = False  # the set's common level was removed (the levels are one level plus drag)
+
+    def with_offset(self, offset: float) -> Baseline:
+        """This baseline with the set's common level ``offset`` [N] removed at the contact instead."""
+        return replace(self, offset=offset, common=True)
 
     def remove(self, z: np.ndarray, force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(z from the contact, force without the baseline) [m, N]."""
@@ -64,7 +82,52 @@ def estimate_baseline(z: np.ndarray, force: np.ndarray, spring_constant: float) 
     excess = force - (intercept + tilt * z)
     depth = z - excess / spring_constant
     contact_z = _hertz_contact(depth, excess, depth[min(guess, z.size - 1)])  # F = 0 there, so z = w
-    return Baseline(float(contact_z), float(intercept + tilt * contact_z), float(tilt))
+    level = float(intercept + tilt * contact_z)
+    return Baseline(float(contact_z), level, float(tilt), level, _level_std(z[free], excess[free], contact_z))
+
+
+def _level_std(z: np.ndarray, noise: np.ndarray, contact_z: float) -> float:
+    """Standard error [N] of a line's value at ``contact_z`` fitted to ``noise`` at ``z``, under the
+    noise's own correlation (white + AR(1), fitted on it): the white formula σ²(1/n + (z_c − z̄)²/Sxx)
+    times the inflation of a mean over the whole stretch."""
+    n, centre = noise.size, z.mean()
+    leverage = 1.0 / n + (contact_z - centre) ** 2 / np.sum((z - centre) ** 2)
+    share, memory, std = fit_correlation([noise], max(2, min(50, n // 3)))
+    return std * math.sqrt(leverage * max(1.0, model_inflation(share, memory, n)))
+
+
+@dataclass(frozen=True)
+class LevelsWithSpeed:
+    """The curves' baseline levels o_i against one common level plus drag, o_i = a + b·v_i, weighted by
+    their standard errors: under that model χ² follows χ²(curves − 2)."""
+
+    common: float  # a [N]
+    drag: float  # b [N s/m]
+    drag_std: float
+    chi_square: float
+    dof: int
+
+    @property
+    def consistent(self) -> bool:
+        """The levels are one level plus drag: χ² within the model's (1 − ``REJECT``) quantile."""
+        return self.chi_square <= scipy.stats.chi2.ppf(1.0 - REJECT, self.dof)
+
+
+def levels_with_speed(levels: np.ndarray, stds: np.ndarray, speeds: np.ndarray) -> LevelsWithSpeed | None:
+    """The weighted fit of o_i = a + b·v_i, or None when it cannot be told from free per-curve levels: fewer
+    than three speeds (two levels are always one level plus drag), or fewer than ``MIN_DOF`` degrees of
+    freedom (three levels of independent offsets a few times their standard errors apart fall within
+    χ²(1)'s 99% quantile of some line about one time in ten, and would pass for drag)."""
+    if np.unique(speeds).size < 3 or levels.size - 2 < MIN_DOF or not np.all(stds > 0):
+        return None
+    design = np.column_stack([np.ones_like(speeds), speeds]) / stds[:, None]
+    target = levels / stds
+    coefficients, *_ = np.linalg.lstsq(design, target, rcond=None)
+    chi_square = float(np.sum((target - design @ coefficients) ** 2))
+    covariance = np.linalg.inv(design.T @ design)
+    return LevelsWithSpeed(
+        float(coefficients[0]), float(coefficients[1]), float(np.sqrt(covariance[1, 1])), chi_square, len(levels) - 2
+    )
 
 
 def _hertz_contact(depth: np.ndarray, force: np.ndarray, guess: float) -> float:

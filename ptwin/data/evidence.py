@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ptwin.data.contact import levels_with_speed
 from ptwin.data.kinematics import CurveKinematics
 
 SPOT_VARIATION = 0.05  # replicates differing by more than this are reported
@@ -64,28 +65,31 @@ def _force_ratio_spread(a: CurveKinematics, b: CurveKinematics) -> float | None:
 
 
 def drag_from_baselines(curves: list[CurveKinematics]) -> str | None:
-    """What the removed baseline offsets say about drag on the cantilever (offset = a + b·speed): a slope
-    needs at least 4 curves at 3 speeds to be told from offsets that differ from curve to curve; with
-    fewer, the offsets are listed. None when no baseline was removed."""
+    """What the curves' baseline levels say about drag on the cantilever, by the test that decided which
+    level was removed (``ptwin.data.contact.levels_with_speed``); None when no baseline was estimated."""
     removed = [c for c in curves if c.baseline is not None]
-    speeds = np.array([c.base_speed for c in removed])
     if not removed:
         return None
-    if len(removed) < 4 or np.unique(speeds).size < 3:
-        listing = ", ".join(f"{c.curve} {c.baseline.offset * 1e9:.3g} nN" for c in removed)
-        return f"Removed baseline offsets: {listing} (too few curves and speeds to tell drag from offset scatter)."
-    offsets = np.array([c.baseline.offset for c in removed])
-    design = np.column_stack([np.ones_like(speeds), speeds])
-    (intercept, slope), residual, *_ = np.linalg.lstsq(design, offsets, rcond=None)
-    scatter = float(np.sum((offsets - design @ [intercept, slope]) ** 2)) / max(len(removed) - 2, 1)
-    std = float(np.sqrt(scatter * np.linalg.inv(design.T @ design)[1, 1]))
-    if std > 0 and abs(slope) > 3 * std:
+    baselines = [c.baseline for c in removed]
+    levels, stds = np.array([b.level for b in baselines]), np.array([b.level_std for b in baselines])
+    fit = levels_with_speed(levels, stds, np.array([c.base_speed for c in removed]))
+    listing = ", ".join(
+        f"{c.curve} {c.baseline.level * 1e9:.3g} ± {c.baseline.level_std * 1e9:.2g} nN" for c in removed
+    )
+    if fit is None:
         return (
-            f"The removed baseline offsets grow with speed by {slope:.2g} ± {std:.1g} N s/m: drag on the cantilever "
-            f"(cantilever_drag), removed with the baselines."
+            f"Baseline levels {listing}: too few curves and speeds (four curves at three speeds at least) to tell one "
+            "level plus drag (b·speed) from free per-curve offsets; each curve's own level is removed, drag with it."
+        )
+    if fit.consistent:
+        return (
+            f"Baseline levels {listing} are one common level plus {fit.drag:.2g} ± {fit.drag_std:.1g} N s/m × speed "
+            f"(χ² {fit.chi_square:.1f} on {fit.dof} degrees of freedom): only the common level is removed, so drag "
+            "on the cantilever, if any, stays in the force."
         )
     return (
-        f"The removed baseline offsets do not depend on speed (slope {slope:.2g} ± {std:.1g} N s/m): no sign of drag."
+        f"Baseline levels {listing} differ by more than one common level plus drag explains (χ² {fit.chi_square:.0f} "
+        f"on {fit.dof} degrees of freedom): each curve's own level is removed, drag with it."
     )
 
 

@@ -69,6 +69,8 @@ class Term(nn.Module):
     a term explaining the same residual), ``ACTS_ON_ELASTIC`` (its hook is ``elastic_force``),
     ``WITH_ESTIMATED_CONTACT`` (why it is no candidate when contact points are estimated:
     what it models is then fitted or removed as a nuisance; None if it stays one),
+    ``KEPT_BY_COMMON_LEVEL`` (it stays a candidate after all where one common baseline level was
+    removed from every curve: what it models is then still in the force),
     ``CONTACT_CAVEAT`` (what estimated contacts hide of it on approach curves, or None).
     """
 
@@ -78,6 +80,7 @@ class Term(nn.Module):
     TELL_APART: ClassVar[str]
     ACTS_ON_ELASTIC: ClassVar[bool] = False
     WITH_ESTIMATED_CONTACT: ClassVar[str | None] = None
+    KEPT_BY_COMMON_LEVEL: ClassVar[bool] = False
     CONTACT_CAVEAT: ClassVar[str | None] = None
 
     def __init__(self, probe_radius: float, **values: float):
@@ -241,7 +244,11 @@ class CantileverDrag(Term):
     name = "cantilever_drag"
     PARAMS = {"b": Parameter("N s/m", 0.0, minimum=0.0, plausible=(0.0, 1e-2))}
     TELL_APART = "the approach before contact at each speed (drag offsets the baseline)"
-    WITH_ESTIMATED_CONTACT = "each curve's baseline offset, where drag shows, is removed (and reported)"
+    WITH_ESTIMATED_CONTACT = (
+        "the curves' baseline levels differ by more than one common level plus drag would (or too few speeds "
+        "to tell), so each curve's own level is removed, drag with it"
+    )
+    KEPT_BY_COMMON_LEVEL = True
 
     def force(self, samples, radius):
         return self.value("b") * samples.base_speed

@@ -115,7 +115,12 @@ def _candidates(prepared: Prepared, settings: Settings) -> tuple[DiagnosisSettin
     notes = list(prepared.notes)
     terms = settings.diagnosis.terms
     if prepared.estimated_contact:
-        skipped = [t for t in terms if VOCABULARY[t].WITH_ESTIMATED_CONTACT]
+        skipped = [
+            t
+            for t in terms
+            if VOCABULARY[t].WITH_ESTIMATED_CONTACT
+            and not (VOCABULARY[t].KEPT_BY_COMMON_LEVEL and prepared.common_level)
+        ]
         notes += [f"{t} is not a candidate: {VOCABULARY[t].WITH_ESTIMATED_CONTACT}." for t in skipped]
         terms = [t for t in terms if t not in skipped]
         notes += [f"{t}: {VOCABULARY[t].CONTACT_CAVEAT}." for t in terms if VOCABULARY[t].CONTACT_CAVEAT]
