@@ -4,13 +4,14 @@ Held-out curves: each fitted curve in turn is left out, the model with the named
 and the model without the term are refitted on the others (from the full fit, so a
 few LM steps), and both predict the curve they never saw. The gain is the ratio of
 their RMS over all held-out curves; the term's parameters across the folds show
-whether the curves agree on them.
+whether the curves agree on them, among the folds that still hold every kind of segment
+(a fold without the only hold fits the approaches alone: a different question).
 
 The grade (README, "Confidence"):
 - strong: removing the term costs ≥ 3 × the BIC margin under the noise model, no other
   candidate explains the data as well, its values are plausible, and on held-out curves
   it gains ≥ the held-out margin with parameters that agree across folds (relative
-  spread ≤ ``STABLE``);
+  spread ≤ ``STABLE``, or within ``AGREE`` standard errors of each fold's own fit);
 - moderate: at most one shortfall, and a mild one — a smaller BIC cost (still ≥ the
   margin), too few curves to hold one out, or parameters that vary across folds;
 - weak: anything else, in particular a confounded, implausible or held-out-contradicted
@@ -30,6 +31,7 @@ from ptwin.fitting.physics_fit import PhysicsFit, fit_physics
 from ptwin.physics.samples import Samples
 
 STABLE = 0.5  # largest relative spread of a parameter across folds
+AGREE = 3.0  # standard errors within which two folds' values agree whatever their relative spread
 FOLD_ITERATIONS = 20
 
 
@@ -54,7 +56,12 @@ def held_out_curves(
     if len(samples.curve_ids) < 2:
         return None
     errors = {"named": 0.0, "smaller": 0.0}
-    values: dict[str, list[float]] = {}
+    kinds = set(samples.segment[seen].tolist())
+
+    def comparable(rest):  # a fold without every kind of segment answers another question (a hold's relaxation)
+        return set(samples.segment[rest].tolist()) == kinds
+
+    values: dict[str, list[tuple[float, float]]] = {}  # 'term.param' → (value, std) of each fold
     for curve in range(len(samples.curve_ids)):
         held = seen[samples.curve[seen] == curve]
         rest = seen[samples.curve[seen] != curve]
@@ -66,19 +73,28 @@ def held_out_curves(
                 return None
             with torch.no_grad():
                 errors[key] += (refit.model(samples)[held] - samples.force[held]).square().sum().item()
-            if key == "named":
+            if key == "named" and comparable(rest):
                 for term, params in refit.params.items():
                     for name, value in params.items():
-                        values.setdefault(f"{term}.{name}", []).append(value)
+                        values.setdefault(f"{term}.{name}", []).append((value, refit.param_std[term][name]))
     spread = {name: _spread(v) for name, v in values.items()}
     gain = math.sqrt(errors["smaller"] / errors["named"]) if errors["named"] > 0 else math.inf
     return HeldOut(gain, spread, len(samples.curve_ids))
 
 
-def _spread(values: list[float]) -> float:
-    ordered = sorted(values)
-    median = ordered[len(ordered) // 2]
-    return (ordered[-1] - ordered[0]) / abs(median) if median != 0 else math.inf
+def _spread(folds: list[tuple[float, float]]) -> float:
+    """(max − min)/|median| of a parameter across folds, or 0 when no two folds differ by more than
+    ``AGREE`` standard errors of their difference (each fold's own, under the noise model): a spread the
+    folds' noise explains is no disagreement. Under a common value a pair differs by more than 3 standard
+    errors with probability 0.3% (fold estimates share most of their data, so this errs towards agreeing)."""
+    ordered = sorted(folds)
+    median = ordered[len(ordered) // 2][0]
+    significant = any(
+        abs(a - b) > AGREE * math.hypot(sa, sb) for i, (a, sa) in enumerate(ordered) for b, sb in ordered[i + 1 :]
+    )
+    if not significant:
+        return 0.0
+    return (ordered[-1][0] - ordered[0][0]) / abs(median) if median != 0 else math.inf
 
 
 @dataclass
@@ -94,11 +110,9 @@ def grade(
     held_out: HeldOut | None,
     bic_margin: float,
     heldout_margin: float,
-    weak: str | None = None,
 ) -> Grade:
-    """The confidence of one named term from its evidence (rules in the module docstring); ``weak``: a
-    reason that makes it weak whatever else (only the information criterion prefers it)."""
-    mild, serious = [], [weak] if weak else []
+    """The confidence of one named term from its evidence (rules in the module docstring)."""
+    mild, serious = [], []
     if removal_cost < 3 * bic_margin:
         mild.append(f"removing it costs only {removal_cost:.0f} BIC under the noise model")
     if confounded_with:

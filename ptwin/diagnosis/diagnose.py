@@ -27,6 +27,7 @@ from ptwin.physics.terms import VOCABULARY
 
 FORMAT = "ptwin-diagnosis/2"
 CORRELATED = 0.95  # |correlation| with K worth a warning
+_LOG_FLOAT_MAX = math.log(1e300)  # a 95% range wider than this factor in K is unbounded
 
 
 @dataclass
@@ -171,7 +172,7 @@ def diagnose(
             named = corrected.fit.model(samples)[seen] - base.fit.model(samples)[seen]
         witness = _explained_fraction(learned, named)
     context = _Context(samples, split, seen, candidates, corrected, fit, noise, witness)
-    left_out = [_left_out_entry(term, chosen, context, rivals, make_model, s, pick.weak) for term in chosen]
+    left_out = [_left_out_entry(term, chosen, context, rivals, make_model, s) for term in chosen]
     left_out.sort(key=lambda entry: -entry["test_rmse_gain"])
     diagnosis = Diagnosis(
         detected=pick.detected,
@@ -200,7 +201,7 @@ class _Selection:
 
     structured: bool  # the base model's residual is structure beyond the noise (whiteness above threshold)
     chosen: tuple[str, ...] = ()
-    weak: str | None = None  # why the choice is weak whatever else: only the information criterion prefers it
+    preferred: tuple[str, ...] = ()  # no structure, yet the information criterion prefers this term
     unexplained: bool = False
     notes: list[str] = field(default_factory=list)
 
@@ -211,8 +212,10 @@ class _Selection:
 
 def _select(candidates: dict, s: DiagnosisSettings) -> _Selection:
     """Structure in the base residual: the chosen subset (``choose``), or unexplained if it leaves structure
-    or there is none. No structure, but single terms that beat the base model by the BIC margin under the
-    noise model: the best of them, named with weak confidence. Neither: nothing is named."""
+    or there is none. No structure: nothing is named (contract v2.3), but the single term that beats the
+    base model by the BIC margin under the noise model, if any, is said to be preferred by the information
+    criterion alone and listed beside the base model (a model error a tenth of the noise, which real data
+    always have, earns such a margin over thousands of samples)."""
     base = candidates[()]
     if base.whiteness > s.whiteness_threshold:
         chosen, notes = choose(candidates, s.bic_margin, s.heldout_margin)
@@ -230,26 +233,30 @@ def _select(candidates: dict, s: DiagnosisSettings) -> _Selection:
         return _Selection(False)
     best = min(better, key=lambda c: c.fit.bic)
     why = (
-        f"the base model's residual is within the noise (whiteness {base.whiteness:.1f} ≤ {s.whiteness_threshold:g}): "
-        f"only the information criterion prefers it, by {base.fit.bic - best.fit.bic:.0f}"
+        f"{best.terms[0]} lowers the BIC by {base.fit.bic - best.fit.bic:.0f}, but the base model's residual is "
+        f"within the noise (whiteness {base.whiteness:.1f} ≤ {s.whiteness_threshold:g}): not named, listed "
+        "beside the base model"
     )
-    return _Selection(False, best.terms, weak=why)
+    return _Selection(False, preferred=best.terms, notes=[why])
 
 
 def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings) -> list[tuple[str, ...]]:
-    """Subsets that explain the data about as well as the chosen one (the base model among them when the
-    choice is weak); with nothing named, the single terms that explain them as well as the base model
-    does but with a materially different K (K is then not fixed by the data)."""
+    """Subsets that explain the data about as well as the chosen one; with nothing named, the term the
+    information criterion alone prefers and the single terms that explain the data as well as the base
+    model does but with a materially different K (K is then not fixed by the data)."""
     if pick.chosen:
-        rivals = confounded(candidates, pick.chosen, s.bic_margin, s.heldout_margin)
-        return [*rivals, ()] if pick.weak else rivals
+        return confounded(candidates, pick.chosen, s.bic_margin, s.heldout_margin)
     if pick.unexplained:
         return []
     base = candidates[()].fit
-    return [
+    return [pick.preferred] * bool(pick.preferred) + [
         t
         for t, c in candidates.items()
-        if len(t) == 1 and c.usable and c.fit.bic - base.bic < s.bic_margin and _other_permeability(c.fit, base)
+        if len(t) == 1
+        and t != pick.preferred
+        and c.usable
+        and c.fit.bic - base.bic < s.bic_margin
+        and _other_permeability(c.fit, base)
     ]
 
 
@@ -308,7 +315,7 @@ def _confound(chosen: tuple[str, ...], other: tuple[str, ...], candidates: dict)
     }
 
 
-def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: DiagnosisSettings, weak) -> dict:
+def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: DiagnosisSettings) -> dict:
     """The contract's ``left_out`` item of one named term: values, intervals, grade, evidence in words."""
     corrected = c.corrected.fit
     without = c.candidates.get(tuple(t for t in chosen if t != term), c.candidates[()])
@@ -316,7 +323,7 @@ def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: Diag
     removal = without.fit.bic - corrected.bic
     rivals = [" + ".join(t) or "the base model" for t in alternatives]
     implausible = corrected.implausible.get(term)
-    verdict = grade(removal, rivals, implausible, held_out, s.bic_margin, s.heldout_margin, weak)
+    verdict = grade(removal, rivals, implausible, held_out, s.bic_margin, s.heldout_margin)
     gain = _test_rmse(without, c.samples, c.split) / c.fit["corrected"]["test_rmse"]
     return {
         "term": term,
@@ -338,8 +345,10 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut |
     )
     if held_out is not None:
         sentence += f"; on curves left out of the fit it predicts {held_out.gain:.2f}× better"
-    if c.witness is not None:
+    if c.witness is not None and c.witness > -1.0:
         sentence += f"; it accounts for {100 * c.witness:.0f}% of the error the hybrid network learned"
+    elif c.witness is not None:  # the network learned far less than the term adds: no witness either way
+        sentence += "; the hybrid network learned little of this error at its chosen regularisation"
     sentence += "."
     correlated = [
         name for name, value in corrected.fit.correlation_with_permeability[term].items() if abs(value) > CORRELATED
@@ -363,9 +372,18 @@ def _parameter_intervals(fit: PhysicsFit, term: str, c: _Context) -> dict[str, l
         value, std = fit.params[term][name], fit.param_std[term][name]
         raw_std = std / abs(value) if parameter.log and value else std
         low, high = _raw_interval(fit, f"terms.{term}.{module.raw_name(name)}", raw_std, c)
-        to_value = math.exp if parameter.log else float
-        intervals[name] = [None if low is None else to_value(low), None if high is None else to_value(high)]
+        to_value = _exp_or_none if parameter.log else _float_or_none
+        intervals[name] = [to_value(low), to_value(high)]
     return intervals
+
+
+def _exp_or_none(log_value: float | None) -> float | None:
+    """exp of a bound in log units; None (no bound) where there is none or it is beyond any float."""
+    return None if log_value is None or log_value > _LOG_FLOAT_MAX else math.exp(log_value)
+
+
+def _float_or_none(value: float | None) -> float | None:
+    return None if value is None else float(value)
 
 
 def _permeability(c: _Context, alternatives: list[Candidate], unexplained: bool) -> dict:
@@ -382,10 +400,10 @@ def _permeability(c: _Context, alternatives: list[Candidate], unexplained: bool)
         }
     raw_std = corrected.permeability_std / corrected.permeability
     low, high = _raw_interval(corrected, PERMEABILITY, raw_std, c)
-    interval = [None if low is None else math.exp(low), None if high is None else math.exp(high)]
+    interval = [_exp_or_none(low), _exp_or_none(high)]
     for other in alternatives:  # the base model too, when it is a rival: its own 95% range (Wald, in log K)
         k, spread = other.fit.permeability, 1.96 * other.fit.permeability_std / other.fit.permeability
-        bounded = math.isfinite(spread)
+        bounded = spread < _LOG_FLOAT_MAX  # a wider range is no bound at all (and would overflow)
         interval = [
             None if interval[0] is None or not bounded else min(interval[0], k * math.exp(-spread)),
             None if interval[1] is None or not bounded else max(interval[1], k * math.exp(spread)),

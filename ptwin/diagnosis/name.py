@@ -134,7 +134,9 @@ def choose(candidates: dict, bic_margin: float, heldout_margin: float) -> tuple[
 
 
 def confounded(candidates: dict, chosen: tuple[str, ...], bic_margin: float, heldout_margin: float):
-    """Other usable subsets of the chosen size that explain the data as well."""
+    """Other usable subsets of the chosen size that explain the data as well by either measure: a term is
+    kept only if removing it costs both margins (``choose``), so a rival is told apart only if it falls short
+    of the chosen subset by both."""
     if not chosen:
         return []
     best = candidates[chosen]
@@ -144,8 +146,7 @@ def confounded(candidates: dict, chosen: tuple[str, ...], bic_margin: float, hel
         if len(t) == len(chosen)
         and t != chosen
         and c.usable
-        and abs(c.fit.bic - best.fit.bic) < bic_margin
-        and abs(c.val_rmse / best.val_rmse - 1) < heldout_margin
+        and (c.fit.bic - best.fit.bic < bic_margin or c.val_rmse / best.val_rmse - 1 < heldout_margin)
     ]
 
 
