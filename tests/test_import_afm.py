@@ -38,6 +38,17 @@ def test_vendor_file_becomes_a_valid_recording_set(tmp_path, name, extra, speed)
     assert z[0] < 0 < z[-1]  # the estimated contact lies inside the approach
 
 
+def test_a_file_lacking_its_calibration_says_which_options_to_pass(tmp_path, capsys):
+    # afmformats raises MissingMetaDataError (a BaseException) and logs its traceback: one line, exit 2.
+    name = "fmt-ntmdt-txt-fd_2015_01_17_gel4-0,1_mQ_adh_6B_Curve_DFL_Height_51.txt"
+    with pytest.raises(SystemExit) as stop:
+        main([str(AFM / name), "--out", str(tmp_path / "set"), *COMMON])
+    assert stop.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert error.count("\n") == 0 and name in error
+    assert "--sensitivity" in error and "--spring-constant" in error
+
+
 def test_files_of_different_cantilevers_are_refused(tmp_path, capsys):
     files = [str(AFM / "fmt-jpk-fd_spot3-0192.jpk-force"), str(AFM / "fmt-igor-fd_U3_3_p10004.ibw")]
     with pytest.raises(SystemExit) as exit:

@@ -19,6 +19,7 @@ else uniform over travel / approach speed.
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from pathlib import Path
 
@@ -33,10 +34,17 @@ from ptwin.data.recordings import Meta, RecordingError, load_recordings, write_r
 def load_datasets(path: Path, overrides: dict) -> list:
     """Every force-distance dataset afmformats reads from ``path`` (one for a curve file, one per spot and
     curve for a force map)."""
+    quiet = logging.getLogger("afmformats")
+    level, quiet.level = quiet.level, logging.CRITICAL  # it logs a traceback for every error it then raises
     try:
         return afmformats.load_data(path, meta_override=overrides)
+    except afmformats.errors.MissingMetaDataError as error:  # a BaseException, not an Exception
+        options = " and ".join(f"--{key.replace(' ', '-')}" for key in error.meta_keys)
+        raise RecordingError(f"{path}: the file gives no {' or '.join(error.meta_keys)}; pass {options}") from None
     except Exception as error:  # afmformats raises format-specific errors
         raise RecordingError(f"{path}: afmformats cannot read it ({error}); check the file and its format") from None
+    finally:
+        quiet.setLevel(level)
 
 
 def approach_curve(path: Path, speed: float | None, overrides: dict) -> tuple[pd.DataFrame, float, float]:
