@@ -4,11 +4,11 @@
 - ``U = dw/dt`` by local linear regression over a centred window of ``smoothing``
   (fraction of the approach's samples, ≈5%): a raw finite difference (paper eq. 7) turns
   force noise σ/k_s into a velocity noise ~σ/(k_s Δt) that invents rate effects. Windows
-  stay within a segment (approach, hold, retract) and stay centred, shrinking towards a
-  segment's ends: the tip stops at the ramp/hold corner within a few samples, and a
-  window reaching past it would smear the stop over the hold's first milliseconds, where
-  a fast relaxation (a pore pressure draining in 5–20 ms) is all there is to see. Every
-  sample of a hold is fitted.
+  stay within a segment (approach, hold, retract), so the ramp/hold corner is not smeared
+  (one-sided at a segment's ends: a window shrunk to a few samples there would carry that
+  velocity noise into the Darcy force, several noise std at a fast curve's deepest samples).
+  Every sample of a hold is fitted: its first milliseconds are where a fast relaxation (a
+  pore pressure draining in 5–20 ms) is all there is to see.
 - Fits use the approach and the hold; a retract is kept but left out (adhesion and
   unloading are not in the vocabulary).
 - The noise of each curve (``ptwin.data.noise``): measured on its pre-contact baseline
@@ -102,12 +102,12 @@ def segmented_derivative(time: np.ndarray, values: np.ndarray, window: int, segm
 def smoothed_derivative(time: np.ndarray, values: np.ndarray, window: int) -> np.ndarray:
     """Slope of a least-squares line over a centred window of ``window`` samples.
 
-    Works on non-uniform time; towards the ends the window shrinks and stays centred (one
-    neighbour at the very ends), so a corner just past an end cannot bias the slope there.
+    Works on non-uniform time; the window shrinks (stays centred where possible) at
+    the ends.
     """
     n = len(values)
     index = np.arange(n)
-    half = np.clip(np.minimum(index, n - 1 - index), 1, max(1, window // 2))
+    half = max(1, window // 2)
     lo, hi = np.clip(index - half, 0, n - 1), np.clip(index + half, 0, n - 1)
     return window_line(time, values, lo, hi, time)[1]
 
