@@ -83,6 +83,17 @@ def test_choose_takes_the_lowest_physical_bic_then_prunes_what_does_not_pay_twic
     assert choose(strong_pair, 10.0, 0.10) == (("a", "b"), [])
 
 
+class AboveFive:
+    """A structure test whose threshold is 5 (what the null distribution gives is tested in test_null)."""
+
+    @staticmethod
+    def structured(whiteness):
+        return whiteness > 5.0
+
+
+ABOVE_FIVE = AboveFive()
+
+
 @pytest.mark.parametrize(("max_terms", "pair_whiteness", "largest"), [(3, 50.0, 3), (3, 2.0, 2), (1, 50.0, 1)])
 def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_structure(
     monkeypatch, max_terms, pair_whiteness, largest
@@ -105,7 +116,7 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
     samples = type("Samples", (), {"force": torch.zeros(10)})()
     split = type("Split", (), {"train": torch.arange(5), "val": torch.arange(5, 8)})()
-    name.fit_candidates(None, samples, split, ["a", "b", "c"], max_terms, 1, 50, 5.0, progress=lambda line: None)
+    name.fit_candidates(None, samples, split, ["a", "b", "c"], max_terms, 1, 50, ABOVE_FIVE, progress=lambda line: None)
     assert max(len(t) for t in fitted) == largest
     assert sum(len(t) == largest for t in fitted) == {1: 3, 2: 3, 3: 1}[largest]
 
@@ -136,5 +147,5 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
     samples = type("Samples", (), {"force": torch.zeros(10)})()
     split = type("Split", (), {"train": torch.arange(5), "val": torch.arange(5, 8)})()
-    name.fit_candidates(None, samples, split, ["a", "b", "c"], 2, 1, 50, 5.0, progress=lambda line: None)
+    name.fit_candidates(None, samples, split, ["a", "b", "c"], 2, 1, 50, ABOVE_FIVE, progress=lambda line: None)
     assert max(len(t) for t in fitted) == largest

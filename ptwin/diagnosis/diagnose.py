@@ -15,12 +15,14 @@ from ptwin.diagnosis.design import ExperimentDesign, Prediction
 from ptwin.diagnosis.intervals import profile_interval
 from ptwin.diagnosis.locate import Mismatch, locate
 from ptwin.diagnosis.name import Candidate, choose, confounded, fit_candidates, rejected
+from ptwin.diagnosis.null import StructureTest, structure_test
 from ptwin.diagnosis.words import MATERIAL, finite_or_none, summarise
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import rmse_of
 from ptwin.fitting.physics_fit import PhysicsFit, rmse
 from ptwin.fitting.pointwise import ApparentPermeability
 from ptwin.fitting.split import Split
+from ptwin.physics.elastic import ReferenceCurve
 from ptwin.physics.model import PERMEABILITY
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
@@ -43,7 +45,7 @@ class DiagnosisSettings:
     bic_margin: float = 10.0  # a term stays only if removing it costs at least this much BIC ...
     heldout_margin: float = 0.10  # ... and at least this fraction of the validation RMS
     block: int = 50  # samples per block of the whiteness test
-    whiteness_threshold: float = 5.0  # block statistic above which a residual is structure, not noise
+    false_alarm: float = 0.01  # how often noise alone reads as structure (the whiteness test's size)
     design: bool = True  # propose the recording that separates confounded candidates (simulated; seconds)
 
     def __post_init__(self):
@@ -52,6 +54,10 @@ class DiagnosisSettings:
             raise ValueError(f"diagnosis.terms: unknown {unknown}; the vocabulary is {', '.join(VOCABULARY)}")
         if self.max_terms < 0:
             raise ValueError(f"diagnosis.max_terms must be ≥ 0, got {self.max_terms}")
+        if not 0.0 < self.false_alarm < 0.5:
+            raise ValueError(
+                f"diagnosis.false_alarm must be a probability below 0.5, e.g. 1.0e-3; got {self.false_alarm}"
+            )
 
 
 @dataclass
@@ -131,24 +137,27 @@ def diagnose(
     base_fit: PhysicsFit | None = None,
     notes: list[str] | None = None,
     design: ExperimentDesign | None = None,
+    reference: ReferenceCurve | None = None,
 ) -> Diagnosis:
     """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); candidate fits run
     ``iterations`` LM steps; ``noise`` is the set's noise model; ``base_fit``: the base model already
     fitted so on ``split.train``, if any; ``notes``: evidence about the data, in sentences; ``design``:
     what proposes the next experiment of each confounded group (None: none proposed); ``hybrid``: the
-    trained hybrid twin, whose learned error the named terms are compared with (None: not trained)."""
+    trained hybrid twin, whose learned error the named terms are compared with (None: not trained);
+    ``reference``: the elastic law, whose noise every residual shares (the whiteness test's null)."""
     s = settings
     seen = torch.cat([split.train, split.val]).sort().values
+    test = structure_test(samples, seen, reference, noise, s.block, s.false_alarm)
     progress("diagnosis: fitting the base model and the candidate terms (K refitted with each)")
     fitted = {(): base_fit} if base_fit is not None else None
     candidates = fit_candidates(
-        make_model, samples, split, s.terms, s.max_terms, iterations, s.block, s.whiteness_threshold, progress, fitted
+        make_model, samples, split, s.terms, s.max_terms, iterations, s.block, test, progress, fitted
     )
     base = candidates[()]
-    pick = _select(candidates, s)
+    pick = _select(candidates, s, test)
     with torch.no_grad():
         base_residual = base.fit.model(samples)[seen] - samples.force[seen]
-    where = locate(samples, base_residual, seen, s.block, s.whiteness_threshold) if pick.structured else []
+    where = locate(samples, base_residual, seen, s.block, test) if pick.structured else []
     chosen, corrected = pick.chosen, candidates[pick.chosen]
     # Failed fits and fits whose terms do nothing say so here; non-physical ones are listed as rejected.
     notes = [*(notes or []), *pick.notes]
@@ -191,7 +200,7 @@ def diagnose(
         notes=notes,
         predictions=predictions,
     )
-    diagnosis.summary = summarise(diagnosis, apparent, s.whiteness_threshold)
+    diagnosis.summary = summarise(diagnosis, apparent, test)
     return diagnosis
 
 
@@ -199,7 +208,7 @@ def diagnose(
 class _Selection:
     """What the candidates say: whether the base model misses, and what is named."""
 
-    structured: bool  # the base model's residual is structure beyond the noise (whiteness above threshold)
+    structured: bool  # the base model's residual is structure beyond the noise (``StructureTest``)
     chosen: tuple[str, ...] = ()
     preferred: tuple[str, ...] = ()  # no structure, yet the information criterion prefers this term
     unexplained: bool = False
@@ -210,22 +219,22 @@ class _Selection:
         return self.structured or bool(self.chosen)
 
 
-def _select(candidates: dict, s: DiagnosisSettings) -> _Selection:
-    """Structure in the base residual: the chosen subset (``choose``), or unexplained if it leaves structure
-    or there is none. No structure: nothing is named (contract v2.3), but the single term that beats the
-    base model by the BIC margin under the noise model, if any, is said to be preferred by the information
-    criterion alone and listed beside the base model (a model error a tenth of the noise, which real data
-    always have, earns such a margin over thousands of samples)."""
+def _select(candidates: dict, s: DiagnosisSettings, test: StructureTest) -> _Selection:
+    """Structure in the base residual (``test``): the chosen subset (``choose``), or unexplained if it leaves
+    structure or there is none. No structure: nothing is named (contract v2.3), but the single term that
+    beats the base model by the BIC margin under the noise model, if any, is said to be preferred by the
+    information criterion alone and listed beside the base model (a model error a tenth of the noise, which
+    real data always have, earns such a margin over thousands of samples)."""
     base = candidates[()]
-    if base.whiteness > s.whiteness_threshold:
+    if base.leaves_structure(test):
         chosen, notes = choose(candidates, s.bic_margin, s.heldout_margin)
         corrected = candidates[chosen]
-        if chosen and corrected.whiteness <= s.whiteness_threshold:
+        if chosen and not corrected.leaves_structure(test):
             return _Selection(True, chosen, notes=notes)
         if chosen:
             notes.append(
-                f"{' + '.join(chosen)} lowers the BIC most but leaves structure (whiteness "
-                f"{corrected.whiteness:.1f} > {s.whiteness_threshold:g}): not claimed"
+                f"{' + '.join(chosen)} lowers the BIC most but leaves structure "
+                f"({test.words(corrected.whiteness)}): not claimed"
             )
         return _Selection(True, unexplained=True, notes=notes)
     better = [c for t, c in candidates.items() if len(t) == 1 and c.usable and base.fit.bic - c.fit.bic >= s.bic_margin]
@@ -234,8 +243,7 @@ def _select(candidates: dict, s: DiagnosisSettings) -> _Selection:
     best = min(better, key=lambda c: c.fit.bic)
     why = (
         f"{best.terms[0]} lowers the BIC by {base.fit.bic - best.fit.bic:.0f}, but the base model's residual is "
-        f"within the noise (whiteness {base.whiteness:.1f} ≤ {s.whiteness_threshold:g}): not named, listed "
-        "beside the base model"
+        f"within the noise ({test.words(base.whiteness)}): not named, listed beside the base model"
     )
     return _Selection(False, preferred=best.terms, notes=[why])
 

@@ -5,17 +5,22 @@ The whiteness statistic of a curve splits its residual (in noise units, time ord
 into blocks of ``block`` samples: for white noise each block mean has variance
 1/block, so W = mean(block · mean²) ≈ 1; structure that persists over a block
 inflates it by the block length. Correlated noise inflates it too, by κ² (the noise
-model's block-mean variance over the white expectation), so W is divided by κ²: noise
-reads ≈ 1 whatever its colour, and only structure beyond it counts.
+model's block-mean variance over the white expectation), so W is divided by κ². Noise alone
+still reads above 1 (the elastic law is read off a noisy curve); what it reads, and so the
+threshold, is ``ptwin.diagnosis.null``'s.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 
 from ptwin.physics.samples import Samples
+
+if TYPE_CHECKING:
+    from ptwin.diagnosis.null import StructureTest
 
 
 @dataclass
@@ -56,11 +61,11 @@ def _curve_residual(samples, residual, index, curve):
     return residual[mine] / samples.noise_floor[index][mine], index[mine]
 
 
-def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block: int, threshold: float):
+def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block: int, test: StructureTest):
     """Per curve, the depth range where the residual (N, on ``index``) is structure above the noise.
 
-    A curve is listed when its whiteness exceeds ``threshold``; its range spans the blocks
-    whose mean is more than 3 standard errors off zero.
+    A curve is listed when its whiteness exceeds its quantile under ``test``; its range spans the
+    blocks whose mean is more than 3 standard errors off zero.
     """
     found = []
     for i, curve in enumerate(samples.curve_ids):
@@ -68,7 +73,7 @@ def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block:
         if scaled.numel() == 0:
             continue
         w = whiteness(scaled, block, samples.noise_inflation)
-        if w <= threshold:
+        if w <= test.curve_threshold(i):
             continue
         means, edges = block_means(scaled, block)
         off = (means.abs() * torch.diff(edges).sqrt() > 3.0 * samples.noise_inflation**0.5).nonzero().squeeze(1)

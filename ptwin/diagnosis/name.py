@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import torch
 
 from ptwin.diagnosis.locate import pooled_whiteness
+from ptwin.diagnosis.null import StructureTest
 from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, fit_with_starts, rmse
 from ptwin.fitting.split import Split
@@ -45,6 +46,9 @@ class Candidate:
         """A failed fit, or a physical one with a term that does nothing (ran off to a limit, or below the noise)."""
         return self.fit is None or (self.fit.physical and bool(self.fit.degenerate))
 
+    def leaves_structure(self, test: StructureTest) -> bool:
+        return test.structured(self.whiteness)
+
     @property
     def state(self) -> str:
         """'physical', or why this candidate cannot be an explanation."""
@@ -65,7 +69,7 @@ def fit_candidates(
     max_terms: int,
     iterations: int,
     block: int,
-    threshold: float,
+    test: StructureTest,
     progress: Callable[[str], None] = print,
     fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
 ) -> dict[tuple[str, ...], Candidate]:
@@ -92,7 +96,7 @@ def fit_candidates(
         previous = [c for t, c in candidates.items() if len(t) == size - 1 and c.usable]
         previous = previous or [c for t, c in candidates.items() if len(t) < size and c.usable]
         best = min(previous, key=lambda c: c.fit.bic, default=None)
-        if size > 1 and best is not None and best.whiteness <= threshold:
+        if size > 1 and best is not None and not best.leaves_structure(test):
             break
         for subset in itertools.combinations(terms, size):
             add(subset)
@@ -106,7 +110,8 @@ def _candidate(subset, fit, make_model, samples, split, seen, iterations, block)
         return Candidate(subset, None, math.inf, math.inf, str(error))
     with torch.no_grad():
         residual = fit.model(samples)[seen] - samples.force[seen]
-    return Candidate(subset, fit, rmse(fit.model, samples, split.val), pooled_whiteness(samples, residual, seen, block))
+    whiteness = pooled_whiteness(samples, residual, seen, block)
+    return Candidate(subset, fit, rmse(fit.model, samples, split.val), whiteness)
 
 
 def choose(candidates: dict, bic_margin: float, heldout_margin: float) -> tuple[tuple[str, ...], list[str]]:

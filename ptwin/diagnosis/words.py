@@ -28,16 +28,16 @@ def number(value: float | None, spec: str, missing: str = "not determined") -> s
     return format(value, spec) if value is not None and math.isfinite(value) else missing
 
 
-def summarise(d, apparent, threshold: float) -> str:
+def summarise(d, apparent, test) -> str:
     """One paragraph a person can read: where the base model misses, and what (if anything) explains it."""
     ratio = d.fit["base"]["val_rmse"] / d.noise_floor
     if not d.detected:
         sentence = (
-            f"The base model explains every curve to the noise (validation RMS {ratio:.2f}× the noise std, "
-            f"residual whiteness {d.whiteness['base']:.1f} ≤ {threshold:g} in units of the noise's own correlation)."
+            f"The base model explains every curve to the noise (validation RMS {ratio:.2f}× the noise std; "
+            f"{test.words(d.whiteness['base'])})."
         )
         return sentence + _permeability_not_fixed(d) + _to_tell_apart(d.confounded)
-    sentence = _where(d, ratio, threshold) + _trend(apparent)
+    sentence = _where(d, ratio, test) + _trend(apparent)
     if d.unexplained:
         kept = "the hybrid network's correction is kept, and " if d.fit["hybrid"]["val_rmse"] is not None else ""
         return sentence + (
@@ -89,22 +89,19 @@ def _record(group: dict) -> str:
     return proposal["sentence"] if proposal else group["tell_apart"]
 
 
-def _where(d, ratio: float, threshold: float) -> str:
-    if d.whiteness["base"] <= threshold:
-        return (
-            f"The base model leaves a small excess: its residual is within the noise (validation RMS {ratio:.2f}× the "
-            f"noise std, whiteness {d.whiteness['base']:.1f}), but under the noise model the information criterion "
-            f"prefers a term. "
-        )
+def _where(d, ratio: float, test) -> str:
     if not d.where:
-        return f"The base model misses the curves by {ratio:.1f}× the noise std, in structure rather than noise. "
+        return (
+            f"The base model misses the curves by {ratio:.1f}× the noise std, in structure rather than noise "
+            f"({test.words(d.whiteness['base'])}). "
+        )
     curves = ", ".join(m.curve for m in d.where)
     lo = min(m.depth_from for m in d.where) * MICRO
     hi = max(m.depth_to for m in d.where) * MICRO
     worst = max(m.rms_residual / m.noise_floor for m in d.where)
     return (
         f"{curves} disagree with the base model between {lo:.2f} and {hi:.2f} µm, up to {worst:.1f}× the noise "
-        f"std (whiteness {d.whiteness['base']:.0f} in units of the noise's own correlation). "
+        f"std ({test.words(d.whiteness['base'])}). "
     )
 
 

@@ -106,6 +106,7 @@ def diagnose_set(
         base_fit=identification.base,
         notes=notes,
         design=_design(prepared, settings) if settings.diagnosis.design else None,
+        reference=prepared.make_model.reference,
     )
 
 

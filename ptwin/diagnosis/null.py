@@ -1,0 +1,145 @@
+"""What noise alone reads: the structure test's null distribution under the noise model.
+
+A residual (noise units) is structure when its whiteness W (``ptwin.diagnosis.locate``: block
+means, so a misfit that persists over a block) exceeds what noise alone exceeds at the stated
+false-alarm rate. Its mean square is no test: a soft cantilever's true model leaves 2–3 noise
+variances in contact (the noise there is not the baseline's, real-noise.md), so it would
+refuse right answers.
+
+Under the base model with the right K, a fitted curve's residual is its own noise minus the
+reference curve's noise, carried into every curve by the elastic law read off it (smoothed
+onto depth nodes, interpolated). That second part is the same on every curve and smooth over
+a block, so W sits well above 1 on null sets (≈ 2.6 on a stiff white-noise set, 50-sample
+blocks). The residual is simulated ``REPLICATES`` times from the set's noise model (white +
+AR(1), each curve's σ, the reference's σ through the law's own smoothing), W computed on each
+exactly as on data, and the draws summarised as g·χ²(h)/h (Satterthwaite: g the mean, h =
+2g²/variance). κ² itself was estimated on ν independent block means (``NoiseModel.blocks``),
+so W read on data is that over χ²(ν)/ν:
+
+    W ~ g · F(h, ν),
+
+and a residual is structure when W exceeds its (1 − false alarm) quantile plus what a model
+error of ``MODEL_ERROR`` of the noise std adds (B·e²/κ²): no model of real recordings is
+exact, and a discrepancy of a tenth of the noise is physics nobody left out (the elastic law's
+interpolation, the PGD basis, an independent instrument's elastic law). Not simulated:
+the fit of K and the terms (they absorb a little of the noise, so the test errs towards
+calling noise noise) and the isotonic step of the law (it only irons out wiggles).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+import scipy.stats
+import torch
+
+from ptwin.data.noise import NoiseModel
+from ptwin.physics.elastic import ReferenceCurve
+from ptwin.physics.samples import Samples
+
+REPLICATES = 200
+MODEL_ERROR = 0.15  # a systematic misfit this fraction of the noise std is tolerated as model error
+
+
+@dataclass(frozen=True)
+class ScaledF:
+    """g · F(h, ν) (ν = inf: g · χ²(h)/h)."""
+
+    scale: float  # g, the mean of W on noise alone
+    dof: float  # h
+    noise_blocks: float  # ν
+
+    def quantile(self, false_alarm: float) -> float:
+        if math.isinf(self.noise_blocks):
+            return self.scale * scipy.stats.chi2.ppf(1.0 - false_alarm, self.dof) / self.dof
+        return self.scale * scipy.stats.f.ppf(1.0 - false_alarm, self.dof, self.noise_blocks)
+
+    @classmethod
+    def of(cls, draws: np.ndarray, noise_blocks: float) -> ScaledF:
+        mean, variance = float(draws.mean()), float(draws.var())
+        return cls(mean, 2.0 * mean**2 / variance if variance > 0 else math.inf, noise_blocks)
+
+
+@dataclass(frozen=True)
+class StructureTest:
+    """W on noise alone, pooled over the curves and per curve (by index into ``samples.curve_ids``)."""
+
+    whiteness: ScaledF
+    curves: dict[int, ScaledF]
+    false_alarm: float
+    tolerated: float  # W a model error of MODEL_ERROR adds: block · e² / κ²
+
+    @property
+    def threshold(self) -> float:
+        """The pooled W above which a residual is structure."""
+        return self.whiteness.quantile(self.false_alarm) + self.tolerated
+
+    def curve_threshold(self, curve: int) -> float:
+        return self.curves[curve].quantile(self.false_alarm) + self.tolerated
+
+    def structured(self, whiteness: float) -> bool:
+        return whiteness > self.threshold
+
+    def words(self, whiteness: float) -> str:
+        """The statistic against its threshold, in words."""
+        return (
+            f"whiteness {whiteness:.1f} against {self.threshold:.1f}, what noise alone exceeds one time in "
+            f"{1 / self.false_alarm:.0f}"
+        )
+
+
+def structure_test(
+    samples: Samples,
+    index: torch.Tensor,
+    reference: ReferenceCurve | None,
+    noise: NoiseModel,
+    block: int,
+    false_alarm: float,
+    seed: int = 0,
+) -> StructureTest:
+    """The null distribution of W on the samples ``index`` (time-ordered) under ``noise``;
+    ``reference``: the elastic law whose noise every residual shares (None: none, the curves' own noise)."""
+    rng = np.random.default_rng(seed)
+    inherited = 0.0
+    if reference is not None:
+        nodes = reference.smooth(_draw(rng, reference.samples, noise)) * reference.noise_std  # (nodes, R)
+        at, t = (v.detach().cpu().numpy() for v in reference.bracket(samples.depth[index].detach().cpu()))
+        inherited = nodes[at] * (1.0 - t[:, None]) + nodes[at + 1] * t[:, None]  # (samples, R) [N]
+    sigma = samples.noise_floor[index].detach().cpu().numpy()[:, None]
+    residual = (sigma * _draw(rng, index.numel(), noise) - inherited) / sigma
+    curve = samples.curve[index].detach().cpu().numpy()
+    per_curve = {c: _whiteness(residual[curve == c], block) / samples.noise_inflation for c in np.unique(curve)}
+    pooled = np.mean(list(per_curve.values()), axis=0)
+    return StructureTest(
+        ScaledF.of(pooled, noise.blocks),
+        {int(c): ScaledF.of(w, noise.blocks) for c, w in per_curve.items()},
+        false_alarm,
+        block * MODEL_ERROR**2 / samples.noise_inflation,
+    )
+
+
+def _draw(rng: np.random.Generator, size: int, noise: NoiseModel) -> np.ndarray:
+    """(size, REPLICATES) unit-variance draws of white + AR(1) noise (share c, memory φ), stationary from
+    the first sample (anti-correlated models are drawn white: κ² never goes below 1)."""
+    white = rng.standard_normal((size, REPLICATES))
+    share, memory = noise.share, noise.memory
+    if share <= 0.0 or memory <= 0.0:
+        return white
+    start = rng.standard_normal((1, REPLICATES))
+    innovations = rng.standard_normal((size, REPLICATES))
+    correlated = scipy.signal.lfilter(
+        [math.sqrt(1.0 - memory**2)], [1.0, -memory], innovations, axis=0, zi=memory * start
+    )[0]
+    return math.sqrt(1.0 - share) * white + math.sqrt(share) * correlated
+
+
+def _whiteness(scaled: np.ndarray, block: int) -> np.ndarray:
+    """W of each column of a residual in noise units, blocks as ``locate.block_means`` makes them."""
+    count = max(scaled.shape[0] // block, 1)
+    edges = np.linspace(0, scaled.shape[0], count + 1).astype(int)
+    sums = np.add.reduceat(scaled, edges[:-1], axis=0)
+    lengths = np.diff(edges)[:, None]
+    return np.mean(sums**2 / lengths, axis=0)

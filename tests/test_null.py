@@ -1,0 +1,72 @@
+"""The structure test's null distribution: its false-alarm rate on noise alone is the one it states."""
+
+import numpy as np
+import pytest
+import torch
+
+from ptwin.data.kinematics import curve_kinematics
+from ptwin.data.noise import NoiseModel, model_inflation
+from ptwin.data.recordings import load_recordings, write_recordings
+from ptwin.diagnosis.locate import pooled_whiteness
+from ptwin.diagnosis.null import MODEL_ERROR, structure_test
+from ptwin.physics.elastic import ReferenceCurve
+from ptwin.physics.samples import Samples
+from ptwin.synth.simulator import Experiment, correlated_noise, simulate
+
+BLOCK = 50
+
+
+def flat_samples(curves: int, length: int, std: float, inflation: float) -> Samples:
+    n = curves * length
+    return Samples(
+        time=torch.arange(n, dtype=torch.float64) % length,
+        depth=torch.linspace(0, 1e-6, length, dtype=torch.float64).repeat(curves),
+        velocity=torch.zeros(n, dtype=torch.float64),
+        base_speed=torch.zeros(n, dtype=torch.float64),
+        force=torch.zeros(n, dtype=torch.float64),
+        start=torch.arange(n) % length == 0,
+        curve=torch.arange(n) // length,
+        in_contact=torch.ones(n, dtype=torch.bool),
+        noise_floor=torch.full((n,), std, dtype=torch.float64),
+        curve_ids=tuple(f"v{i}" for i in range(curves)),
+        noise_inflation=inflation,
+    )
+
+
+@pytest.mark.parametrize(("share", "memory"), [(0.0, 0.0), (0.6, np.exp(-1 / 5))])
+def test_noise_alone_exceeds_the_threshold_as_often_as_stated(share, memory):
+    # Known κ² (ν = ∞), no reference: W of 600 simulated residuals against the stated 10% quantile.
+    inflation = max(1.0, model_inflation(share, memory, BLOCK))
+    noise = NoiseModel(2e-10, share * memory, inflation, 0.0, "known", 0, share, memory)
+    samples = flat_samples(3, 1000, 2e-10, inflation)
+    index = torch.arange(3000)
+    test = structure_test(samples, index, None, noise, BLOCK, 0.1)
+    rng = np.random.default_rng(7)
+    draws = []
+    for _ in range(600):
+        parts = [
+            np.sqrt(1 - share) * rng.standard_normal(1000) + np.sqrt(share) * correlated_noise(rng, 1000, 1.0, memory)
+            for _ in range(3)
+        ]
+        residual = torch.from_numpy(np.concatenate(parts) * 2e-10)
+        draws.append(pooled_whiteness(samples, residual, index, BLOCK))
+    assert np.mean(np.array(draws) > test.whiteness.quantile(0.1)) == pytest.approx(0.1, abs=0.04)  # binomial sd 0.012
+    assert np.mean(draws) == pytest.approx(test.whiteness.scale, rel=0.05)
+    # The threshold: the stated quantile, beyond what a tolerated model error adds.
+    assert test.threshold == pytest.approx(test.whiteness.quantile(0.1) + BLOCK * MODEL_ERROR**2 / inflation)
+
+
+def test_the_elastic_laws_own_noise_lifts_what_noise_alone_reads(tmp_path):
+    write_recordings(tmp_path, *simulate(Experiment(samples=1000, noise_std=3e-10, base_speeds=(1e-6, 1e-5))))
+    reference, fitted = curve_kinematics(load_recordings(tmp_path))
+    law = ReferenceCurve(reference)
+    samples = Samples.from_curves([fitted])
+    index = torch.nonzero(samples.in_contact).squeeze(1)
+    white = NoiseModel(3e-10, 0.0, 1.0, 0.0, "known", 0)
+    alone = structure_test(samples, index, None, white, BLOCK, 0.01)
+    shared = structure_test(samples, index, law, white, BLOCK, 0.01)
+    assert alone.whiteness.scale == pytest.approx(1.0, abs=0.15)
+    assert shared.whiteness.scale > 1.3  # a block of the curve averages a few dozen of the reference's samples
+    # ν blocks of baseline behind κ²: a heavier tail, a higher threshold.
+    measured = NoiseModel(3e-10, 0.0, 1.0, 0.0, "known", 0, blocks=8.0)
+    assert structure_test(samples, index, law, measured, BLOCK, 0.01).threshold > 1.5 * shared.threshold
