@@ -50,6 +50,7 @@ MAX_REPEATS = 5
 VERIFIED = 3  # protocols refitted after the screen
 WITHIN = 0.9  # of the reference curve's depth: where protocols stop
 REFIT = 40  # LM iterations of a refit with the simulated curve ...
+BASELINE_SAMPLES = 50  # pre-contact samples a proposed approach keeps at the set's sampling (a contact to estimate)
 REFIT_TOLERANCE = 1e-6  # ... until a step gains less than this (relative): χ² to far below one unit
 MAX_SAMPLES = 2000  # of a simulated curve in a refit (every k-th, its χ² scaled by k)
 SPEEDS = (1e-7, 1e-4)  # [m/s]: what an AFM piezo's approach covers
@@ -171,11 +172,10 @@ class ExperimentDesign:
         depth = WITHIN * self.depth
         holds = self._hold_times(fits)
         menu = [Protocol(fastest, depth, seconds) for seconds in holds]
-        menu += [
-            Protocol(fastest, 0.5 * depth, max(holds)),
-            Protocol(min(3 * fastest, SPEEDS[1]), depth),
-            Protocol(max(slowest / 3, SPEEDS[0]), depth),
-        ]
+        recordable = self.free_travel / (BASELINE_SAMPLES * self.step)  # fastest speed that keeps a baseline
+        menu += [Protocol(fastest, 0.5 * depth, max(holds)), Protocol(max(slowest / 3, SPEEDS[0]), depth)]
+        if min(3 * fastest, SPEEDS[1], recordable) > fastest:
+            menu.append(Protocol(min(3 * fastest, SPEEDS[1], recordable), depth))
         return list(dict.fromkeys(menu))
 
     def _hold_times(self, fits: list[PhysicsFit]) -> list[float]:
