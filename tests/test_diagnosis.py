@@ -149,3 +149,22 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
     split = type("Split", (), {"train": torch.arange(5), "val": torch.arange(5, 8)})()
     name.fit_candidates(None, samples, split, ["a", "b", "c"], 2, 1, 50, ABOVE_FIVE, progress=lambda line: None)
     assert max(len(t) for t in fitted) == largest
+
+
+def test_a_term_named_below_strong_carries_the_experiment_that_would_make_it_strong():
+    # Contract v2.3: the design is asked to separate the named set from the set without the term.
+    from ptwin.diagnosis.diagnose import _make_strong
+
+    asked = []
+
+    class Design:
+        def propose(self, names, fits):
+            asked.append((names, [f.terms for f in fits]))
+            return {"sentence": "approach at 30 µm/s to 2 µm: …"}, "prediction"
+
+    candidates = {t: candidate(t, 1000.0, 1.0) for t in [(), ("a",), ("b",), ("a", "b")]}
+    left_out = [{"term": "a", "confidence": "moderate"}, {"term": "b", "confidence": "strong"}]
+    predictions = _make_strong(left_out, ("a", "b"), candidates, Design(), progress=lambda line: None)
+    assert asked == [(["a + b", "b"], [("a", "b"), ("b",)])]
+    assert left_out[0]["next_experiment"]["sentence"].startswith("approach") and "next_experiment" not in left_out[1]
+    assert predictions == ["prediction"]

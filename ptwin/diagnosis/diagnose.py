@@ -182,6 +182,8 @@ def diagnose(
         witness = _explained_fraction(learned, named)
     context = _Context(samples, split, seen, candidates, corrected, fit, noise, witness)
     left_out = [_left_out_entry(term, chosen, context, rivals, make_model, s) for term in chosen]
+    if design is not None:
+        predictions += _make_strong(left_out, chosen, candidates, design, progress)
     left_out.sort(key=lambda entry: -entry["test_rmse_gain"])
     diagnosis = Diagnosis(
         detected=pick.detected,
@@ -321,6 +323,25 @@ def _confound(chosen: tuple[str, ...], other: tuple[str, ...], candidates: dict)
         "tell_apart": "; ".join(VOCABULARY[t].TELL_APART for t in differing),
         "permeability": {name: candidates[subset].fit.permeability for name, subset in zip(names, (chosen, other))},
     }
+
+
+def _make_strong(left_out: list[dict], chosen, candidates: dict, design: ExperimentDesign, progress) -> list:
+    """Each named term below strong gets the recording that would separate the named set from the set
+    without it by the design's target (contract v2.3, ``left_out[].next_experiment``); the design refits
+    both to the simulated recording before it proposes it. Returns the predictions made."""
+    predictions = []
+    for entry in left_out:
+        if entry["confidence"] == "strong":
+            continue
+        progress(f"diagnosis: the experiment that would make {entry['term']} strong")
+        smaller = tuple(t for t in chosen if t != entry["term"])
+        fits = [candidates[chosen].fit, candidates.get(smaller, candidates[()]).fit]
+        names = [" + ".join(chosen), " + ".join(smaller) or "base model"]
+        proposal = design.propose(names, fits)
+        if proposal is not None:
+            entry["next_experiment"], prediction = proposal
+            predictions.append(prediction)
+    return predictions
 
 
 def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: DiagnosisSettings) -> dict:

@@ -52,6 +52,7 @@ def summarise(d, apparent, test) -> str:
         return (
             sentence
             + f"The base model left out {names} (confidence {grades}): with it the validation RMS falls to {after}."
+            + _to_make_strong(entries)
         )
     sentence += f"{names} would explain it (the validation RMS falls to {after}), but the evidence is weak"
     if d.confounded:
@@ -59,6 +60,15 @@ def summarise(d, apparent, test) -> str:
         sentence += f": the data cannot tell {names} from {rivals}."
         return sentence + _permeability_not_fixed(d) + _to_tell_apart(d.confounded)
     return sentence + "; see each term's evidence."
+
+
+def _to_make_strong(entries: list[dict]) -> str:
+    """' To make X strong, record …' for each named term that carries a proposal; '' otherwise."""
+    return "".join(
+        f" To make {e['term']} strong, record {e['next_experiment']['sentence']}."
+        for e in entries
+        if e.get("next_experiment")
+    )
 
 
 def _permeability_not_fixed(d) -> str:
