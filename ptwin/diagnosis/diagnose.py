@@ -154,7 +154,8 @@ def diagnose(
         make_model, samples, split, s.terms, s.max_terms, iterations, s.block, test, progress, fitted
     )
     base = candidates[()]
-    pick = _select(candidates, s, test)
+    flexible = rmse_of(hybrid, samples, split.val) if hybrid is not None else None
+    pick = _select(candidates, s, test, flexible)
     with torch.no_grad():
         base_residual = base.fit.model(samples)[seen] - samples.force[seen]
     where = locate(samples, base_residual, seen, s.block, test) if pick.structured else []
@@ -165,14 +166,7 @@ def diagnose(
     fit = _fit_table(samples, split, base, corrected, hybrid)
     rivals = _rivals(candidates, pick, s)
     confounds = [_confound(chosen, other, candidates) for other in rivals]
-    predictions = []
-    if design is not None and confounds:
-        progress("diagnosis: simulating each confounded candidate under the experiments that could separate them")
-        for group, other in zip(confounds, rivals):
-            proposal = design.propose(group["terms"], [corrected.fit, candidates[other].fit])
-            if proposal is not None:
-                group["next_experiment"], prediction = proposal
-                predictions.append(prediction)
+    predictions = _tell_apart(confounds, rivals, corrected, candidates, design, progress) if design is not None else []
     progress("diagnosis: the named terms on curves left out of the fit, and intervals under the noise model")
     witness = None
     if hybrid is not None:
@@ -221,9 +215,12 @@ class _Selection:
         return self.structured or bool(self.chosen)
 
 
-def _select(candidates: dict, s: DiagnosisSettings, test: StructureTest) -> _Selection:
-    """Structure in the base residual (``test``): the chosen subset (``choose``), or unexplained if it leaves
-    structure or there is none. No structure: nothing is named (contract v2.3), but the single term that
+def _select(candidates: dict, s: DiagnosisSettings, test: StructureTest, flexible: float | None) -> _Selection:
+    """Structure in the base residual (``test``): the chosen subset (``choose``), or unexplained if there is
+    none, or if it leaves structure that a flexible model captures: the hybrid twin (validation RMS
+    ``flexible`` [N]) predicts the validation samples better. Where even the twin does no better, what is left
+    is no physics either model has (the chosen model's own error), and the subset is named.
+    No structure: nothing is named (contract v2.3), but the single term that
     beats the base model by the BIC margin under the noise model, if any, is said to be preferred by the
     information criterion alone and listed beside the base model (a model error a tenth of the noise, which
     real data always have, earns such a margin over thousands of samples)."""
@@ -232,6 +229,13 @@ def _select(candidates: dict, s: DiagnosisSettings, test: StructureTest) -> _Sel
         chosen, notes = choose(candidates, s.bic_margin, s.heldout_margin)
         corrected = candidates[chosen]
         if chosen and not corrected.leaves_structure(test):
+            return _Selection(True, chosen, notes=notes)
+        if chosen and flexible is not None and flexible >= corrected.val_rmse:
+            notes.append(
+                f"{' + '.join(chosen)} leaves structure ({test.words(corrected.whiteness)}), but the hybrid twin "
+                f"predicts the validation samples no better ({flexible * 1e9:.3g} against "
+                f"{corrected.val_rmse * 1e9:.3g} nN): nothing else is left to explain"
+            )
             return _Selection(True, chosen, notes=notes)
         if chosen:
             notes.append(
@@ -323,6 +327,20 @@ def _confound(chosen: tuple[str, ...], other: tuple[str, ...], candidates: dict)
         "tell_apart": "; ".join(VOCABULARY[t].TELL_APART for t in differing),
         "permeability": {name: candidates[subset].fit.permeability for name, subset in zip(names, (chosen, other))},
     }
+
+
+def _tell_apart(confounds: list[dict], rivals, corrected: Candidate, candidates: dict, design, progress) -> list:
+    """Each confounded group gets the recording that best separates its candidates (``next_experiment``);
+    returns the predictions made."""
+    predictions = []
+    if confounds:
+        progress("diagnosis: simulating each confounded candidate under the experiments that could separate them")
+    for group, other in zip(confounds, rivals):
+        proposal = design.propose(group["terms"], [corrected.fit, candidates[other].fit])
+        if proposal is not None:
+            group["next_experiment"], prediction = proposal
+            predictions.append(prediction)
+    return predictions
 
 
 def _make_strong(left_out: list[dict], chosen, candidates: dict, design: ExperimentDesign, progress) -> list:
