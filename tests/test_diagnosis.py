@@ -90,6 +90,10 @@ class AboveFive:
     def structured(whiteness):
         return whiteness > 5.0
 
+    @staticmethod
+    def words(whiteness):
+        return f"whiteness {whiteness:.1f} against 5"
+
 
 ABOVE_FIVE = AboveFive()
 
@@ -168,3 +172,16 @@ def test_a_term_named_below_strong_carries_the_experiment_that_would_make_it_str
     assert asked == [(["a + b", "b"], [("a", "b"), ("b",)])]
     assert left_out[0]["next_experiment"]["sentence"].startswith("approach") and "next_experiment" not in left_out[1]
     assert predictions == ["prediction"]
+
+
+@pytest.mark.parametrize(("twin_rmse", "named"), [(0.6e-9, ("a",)), (0.3e-9, ())])
+def test_structure_left_is_unexplained_only_where_the_hybrid_twin_predicts_better(twin_rmse, named):
+    from ptwin.diagnosis.diagnose import DiagnosisSettings, _select
+
+    candidates = {
+        (): candidate((), 2000.0, 1.0e-9, whiteness=50.0),
+        ("a",): candidate(("a",), 1000.0, 0.5e-9, whiteness=8.0),  # above the test's 5: structure left
+    }
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, twin_rmse)
+    assert pick.structured and pick.chosen == named and pick.unexplained == (not named)
+    assert _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None).unexplained  # no twin: no witness
