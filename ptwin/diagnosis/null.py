@@ -9,8 +9,9 @@ refuse right answers.
 Under the base model with the right K, a fitted curve's residual is its own noise minus the
 reference curve's noise, carried into every curve by the elastic law read off it (smoothed
 onto depth nodes, interpolated). That second part is the same on every curve and smooth over
-a block, so W sits well above 1 on null sets (≈ 2.6 on a stiff white-noise set, 50-sample
-blocks). The residual is simulated ``REPLICATES`` times from the set's noise model (white +
+a block, so W sits well above 1 on null sets (g ≈ 1.7 on a stiff white-noise set, 50-sample
+blocks; such sets read 2.6, the rest being model error, below). The residual is simulated
+``REPLICATES`` times from the set's noise model (white +
 AR(1), each curve's σ, the reference's σ through the law's own smoothing), W computed on each
 exactly as on data, and the draws summarised as g·χ²(h)/h (Satterthwaite: g the mean, h =
 2g²/variance). κ² itself was estimated on ν independent block means (``NoiseModel.blocks``),
