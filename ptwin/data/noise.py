@@ -117,34 +117,28 @@ def _lagged(a: np.ndarray, b: np.ndarray, lags: int) -> np.ndarray:
     return np.fft.irfft(product, size, axis=0)[: lags + 1]
 
 
+def detrended_lag_sums(length: int, memory, lags: int) -> np.ndarray:
+    """E[Σ_t e_t e_{t+k}], k = 0 … ``lags``, for unit-variance AR(1) noise of memory φ (0: white; one φ or
+    an array of them, a row each) after a least-squares line is removed from a record of ``length``
+    samples: the diagonal sums of M·T·M, M = I − QQᵀ, in O(length · log length) per φ."""
+    memories = np.atleast_1d(np.asarray(memory, dtype=np.float64))
+    index = np.arange(length, dtype=np.float64)
+    q, _ = np.linalg.qr(np.column_stack([np.ones(length), index - index.mean()]))
+    k = np.arange(lags + 1)
+    raw = (length - k)[None, :] * memories[:, None] ** k[None, :]  # 0⁰ = 1: white noise's n at lag 0
+    tq = np.stack([_apply_ar(q, m) for m in memories], axis=2)  # (length, 2, memories)
+    qcore = np.einsum("ti,ijm->tjm", q, np.einsum("ti,tjm->ijm", q, tq))  # Q·(Qᵀ·T·Q) for every φ
+    qq = q[:, :, None]
+    sums = raw - (_lagged(qq, tq, lags) + _lagged(tq, qq, lags) - _lagged(qcore, qq, lags)).sum(axis=1).T
+    return sums if np.ndim(memory) else sums[0]
+
+
 @functools.lru_cache(maxsize=256)
 def _detrended_grid(length: int, lags: int) -> tuple[np.ndarray, np.ndarray]:
-    """``detrended_lag_sums`` of white noise, (lags + 1,), and of AR(1) noise at every memory of the
-    grid, (memories, lags + 1): baselines of one length share them (a map's spots, a set's curves)."""
-    index = np.arange(length, dtype=np.float64)
-    q, _ = np.linalg.qr(np.column_stack([np.ones(length), index - index.mean()]))
-    k = np.arange(lags + 1)
-    raw = (length - k)[None, :] * _MEMORIES[:, None] ** k[None, :]
-    tq = np.stack([_apply_ar(q, memory) for memory in _MEMORIES], axis=2)  # (length, 2, memories)
-    core = np.einsum("ti,tjm->ijm", q, tq)  # Qᵀ·T·Q for every memory
-    qcore = np.einsum("ti,ijm->tjm", q, core)
-    qq = q[:, :, None]
-    ar = raw - (_lagged(qq, tq, lags) + _lagged(tq, qq, lags) - _lagged(qcore, qq, lags)).sum(axis=1).T
-    white = (k == 0) * float(length) - _lagged(q, q, lags).sum(axis=1)  # M·I·M = M
-    return white, ar
-
-
-def detrended_lag_sums(length: int, memory: float, lags: int) -> np.ndarray:
-    """E[Σ_t e_t e_{t+k}], k = 0 … ``lags``, for unit-variance AR(1) noise of memory φ (0: white) after a
-    least-squares line is removed from a record of ``length`` samples: the diagonal sums of M·T·M,
-    M = I − QQᵀ, in O(length · log length)."""
-    index = np.arange(length, dtype=np.float64)
-    q, _ = np.linalg.qr(np.column_stack([np.ones(length), index - index.mean()]))
-    tq = _apply_ar(q, memory)
-    k = np.arange(lags + 1)
-    raw = (length - k) * memory**k if memory else (k == 0) * float(length)
-    qcore = q @ (q.T @ tq)
-    return raw - (_lagged(q, tq, lags) + _lagged(tq, q, lags) - _lagged(qcore, q, lags)).sum(axis=1)
+    """``detrended_lag_sums`` of white noise, (lags + 1,), and at every memory of the grid, (memories,
+    lags + 1): baselines of one length share them (a map's spots, a set's curves)."""
+    sums = detrended_lag_sums(length, np.concatenate([[0.0], _MEMORIES]), lags)
+    return sums[0], sums[1:]
 
 
 def fit_correlation(records: list[np.ndarray], lags: int) -> tuple[float, float, float]:

@@ -154,8 +154,8 @@ def diagnose(
         make_model, samples, split, s.terms, s.max_terms, iterations, s.block, test, progress, fitted
     )
     base = candidates[()]
-    flexible = rmse_of(hybrid, samples, split.val) if hybrid is not None else None
-    pick = _select(candidates, s, test, flexible)
+    twin = _twin_rmse(hybrid, samples, split)
+    pick = _select(candidates, s, test, twin["val_rmse"])
     with torch.no_grad():
         base_residual = base.fit.model(samples)[seen] - samples.force[seen]
     where = locate(samples, base_residual, seen, s.block, test) if pick.structured else []
@@ -163,7 +163,7 @@ def diagnose(
     # Failed fits and fits whose terms do nothing say so here; non-physical ones are listed as rejected.
     notes = [*(notes or []), *pick.notes]
     notes += [f"{' + '.join(t) or 'base'}: {c.state}" for t, c in candidates.items() if c.without_effect]
-    fit = _fit_table(samples, split, base, corrected, hybrid)
+    fit = _fit_table(samples, split, base, corrected, twin)
     rivals = _rivals(candidates, pick, s)
     confounds = [_confound(chosen, other, candidates) for other in rivals]
     predictions = _tell_apart(confounds, rivals, corrected, candidates, design, progress) if design is not None else []
@@ -299,12 +299,15 @@ def _test_rmse(candidate: Candidate, samples: Samples, split: Split) -> float:
     return rmse(candidate.fit.model, samples, split.test)
 
 
-def _fit_table(samples, split, base: Candidate, corrected: Candidate, hybrid: HybridTwin | None) -> dict:
-    """RMS [N] on the validation and test samples; the hybrid twin's None when it was not trained."""
+def _twin_rmse(hybrid: HybridTwin | None, samples, split) -> dict:
+    """The hybrid twin's RMS [N] on the validation and test samples; None when it was not trained."""
     if hybrid is None:
-        twin = {"val_rmse": None, "test_rmse": None}
-    else:
-        twin = {"val_rmse": rmse_of(hybrid, samples, split.val), "test_rmse": rmse_of(hybrid, samples, split.test)}
+        return {"val_rmse": None, "test_rmse": None}
+    return {"val_rmse": rmse_of(hybrid, samples, split.val), "test_rmse": rmse_of(hybrid, samples, split.test)}
+
+
+def _fit_table(samples, split, base: Candidate, corrected: Candidate, twin: dict) -> dict:
+    """RMS [N] on the validation and test samples of the base, corrected and hybrid (``twin``) models."""
     return {
         "base": {"val_rmse": base.val_rmse, "test_rmse": _test_rmse(base, samples, split)},
         "corrected": {"val_rmse": corrected.val_rmse, "test_rmse": _test_rmse(corrected, samples, split)},
