@@ -1,10 +1,16 @@
-"""Kinematics against closed forms: contact radius, smoothed derivative, noise floor."""
+"""Kinematics against closed forms: contact radius, smoothed derivative, noise floor; the samples that pin an
+estimated contact."""
 
 import numpy as np
 import pytest
+import torch
 
-from ptwin.data.kinematics import contact_radius, smoothed_derivative
+from ptwin.data.kinematics import PINNING_TRAVEL, contact_radius, curve_kinematics, smoothed_derivative
 from ptwin.data.noise import second_difference_std
+from ptwin.data.recordings import load_recordings
+from ptwin.fitting.split import split_samples
+from ptwin.physics.samples import Samples
+from tests.conftest import simulated_set
 
 
 def test_contact_radius_is_the_spherical_cap():
@@ -41,3 +47,22 @@ def test_noise_floor_recovers_white_noise_under_a_smooth_signal():
     t = np.linspace(0, 1, 4000)
     force = 5e-7 * t**1.5 + rng.normal(0, 3e-10, t.size)
     assert second_difference_std(force) == pytest.approx(3e-10, rel=0.08)
+
+
+def test_an_estimated_contact_is_pinned_by_the_free_travel_just_before_it_and_the_fits_see_it(tmp_path):
+    folder = simulated_set(tmp_path, contact_point="estimate", contact_error=1e-7, z_start=-1e-6)
+    curves = curve_kinematics(load_recordings(folder))
+    for c in curves:
+        pins = c.pins_contact
+        assert pins.sum() >= 10 and not (pins & c.in_contact).any()
+        assert (c.z[pins] < 0).all() and (c.z[pins] > PINNING_TRAVEL * c.z[0]).all()  # noise comes from before
+        assert abs(c.force[pins].mean()) < 4 * c.noise.std / np.sqrt(pins.sum())  # the force is at baseline there
+    samples = Samples.from_curves(curves)
+    split = split_samples(samples)
+    seen = torch.cat([split.train, split.val, split.test])
+    assert samples.pins_contact[seen].sum() == samples.pins_contact.sum()
+
+
+def test_a_known_contact_pins_nothing(tmp_path):
+    curves = curve_kinematics(load_recordings(simulated_set(tmp_path)))
+    assert not any(c.pins_contact.any() for c in curves)

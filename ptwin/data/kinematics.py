@@ -19,7 +19,11 @@
   and its baseline offset and tilt removed (``ptwin.data.contact``); z then counts from
   the estimate, which the fit refines (``ContactNuisance``). Where the curves' levels are one
   common level plus drag (b·speed within their standard errors), only the common level is
-  removed: the drag stays in the force, as evidence.
+  removed: the drag stays in the force, as evidence. The last quarter of the free travel
+  (``PINNING_TRAVEL``, at most one indentation deep) is fitted with the contact: the force
+  must stay at the baseline there, which pins the refined contact (a contact moved earlier
+  predicts force where there is none) and tells a contact shift from a term growing like √w.
+  The noise is measured on the rest of the free travel, never on samples the fit sees.
 """
 
 from __future__ import annotations
@@ -32,6 +36,8 @@ import pandas as pd
 from ptwin.data.contact import Baseline, NoBaseline, estimate_baseline, levels_with_speed
 from ptwin.data.noise import NoiseModel, curve_noise, with_std
 from ptwin.data.recordings import SEGMENTS, RecordingError, RecordingSet
+
+PINNING_TRAVEL = 0.25  # the last fraction of an approach's free travel, fitted with an estimated contact
 
 
 @dataclass
@@ -47,13 +53,18 @@ class CurveKinematics:
     contact_radius: np.ndarray  # R [m]
     velocity: np.ndarray  # U [m/s]
     height: np.ndarray  # H [m]
-    in_contact: np.ndarray  # bool: samples used in fits (z ≥ 0 and w > 0, not on a retract)
+    in_contact: np.ndarray  # bool: samples in contact, fitted (z ≥ 0 and w > 0, not on a retract)
     segment: np.ndarray  # int: index into SEGMENTS (0 approach, 1 hold, 2 retract)
     base_speeds: np.ndarray  # each sample's base speed [m/s] (0 in a hold)
     noise: NoiseModel
     baseline_offset: float | None  # pre-contact force [N]: its mean (known contact), the removed line's at
     # contact (estimated contact), None without pre-contact samples
     baseline: Baseline | None  # the estimated contact and removed baseline (contact_point: estimate)
+    pins_contact: np.ndarray | None = None  # bool: pre-contact samples fitted with an estimated contact
+
+    def __post_init__(self):
+        if self.pins_contact is None:
+            self.pins_contact = np.zeros_like(self.in_contact)
 
     @property
     def noise_floor(self) -> float:
@@ -129,7 +140,8 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
         depth = z - force / meta.spring_constant
         window = max(5, int(round(smoothing * approach.sum())))  # the approach's: a long hold would widen it
         pre_contact = (z < 0) & approach
-        noise = curve_noise(time, z, force, approach & (z <= 0.25 * min(z[0], 0.0)), block)
+        free = approach & (z <= PINNING_TRAVEL * min(z[0], 0.0))
+        noise = curve_noise(time, z, force, free, block)
         if meta.noise_std:
             noise = with_std(noise, meta.noise_std, "noise_std of meta.yaml")
         offset = baseline.offset if baseline else (float(force[pre_contact].mean()) if pre_contact.any() else None)
@@ -151,6 +163,7 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
                 noise=noise,
                 baseline_offset=offset,
                 baseline=baseline,
+                pins_contact=pre_contact & ~free & (z >= -depth.max()) if baseline is not None else None,
             )
         )
     return result

@@ -29,7 +29,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -278,20 +278,6 @@ class ExperimentDesign:
         meta = replace(self.meta, contact_point="known", reference_curve=name, noise_std=None)
         kinematics = curve_kinematics(RecordingSet(Path("next experiment"), meta, frame), self.smoothing)[0]
         stride = max(1, curve.time.size // MAX_SAMPLES)
-        arrays = {f.name: getattr(kinematics, f.name)[::stride] for f in fields(kinematics) if f.name in STRIDED}
+        arrays = {name: value[::stride] for name, value in vars(kinematics).items() if isinstance(value, np.ndarray)}
         kinematics = replace(kinematics, **arrays, noise=self.noise)
         return Samples.from_curves([kinematics], self.samples.noise_inflation), stride
-
-
-STRIDED = (
-    "time",
-    "z",
-    "force",
-    "depth",
-    "contact_radius",
-    "velocity",
-    "height",
-    "in_contact",
-    "segment",
-    "base_speeds",
-)

@@ -1,4 +1,4 @@
-"""Train/validation/test split of the fitted samples (in-contact samples of the
+"""Train/validation/test split of the fitted samples (``Samples.fitted`` of the
 non-reference curves): random over samples, or by curve (a whole speed held out)."""
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ def split_samples(
     if len(fractions) != 3 or min(fractions) <= 0 or abs(sum(fractions) - 1) > 1e-9:
         raise ValueError(f"split.fractions must be three positive numbers summing to 1, got {list(fractions)}")
     generator = torch.Generator().manual_seed(seed)
-    eligible = torch.nonzero(samples.in_contact).squeeze(1)
+    eligible = torch.nonzero(samples.fitted).squeeze(1)
 
     def shuffled(index):
         return index[torch.randperm(index.numel(), generator=generator)]

@@ -26,18 +26,26 @@ class Samples:
     force: torch.Tensor  # measured force [N] (0 where none was measured)
     start: torch.Tensor  # bool: first sample of a curve
     curve: torch.Tensor  # long: index into ``curve_ids``
-    in_contact: torch.Tensor  # bool: samples a fit may use
+    in_contact: torch.Tensor  # bool: samples in contact (w > 0, not on a retract)
     noise_floor: torch.Tensor  # [N], the curve's noise std σ
     curve_ids: tuple[str, ...]
     noise_inflation: float = 1.0  # κ² of the set's noise: block-mean variance over the white expectation
     segment: torch.Tensor | None = None  # long: 0 approach, 1 hold, 2 retract (None: all approach)
     nominal_speed: torch.Tensor | None = None  # the curve's approach speed [m/s] (None: base_speed)
+    pins_contact: torch.Tensor | None = None  # bool: pre-contact samples that pin an estimated contact (None: none)
 
     def __post_init__(self):
         if self.segment is None:
             self.segment = torch.zeros_like(self.curve)
         if self.nominal_speed is None:
             self.nominal_speed = self.base_speed
+        if self.pins_contact is None:
+            self.pins_contact = torch.zeros_like(self.in_contact)
+
+    @property
+    def fitted(self) -> torch.Tensor:
+        """bool: the samples a fit may use: those in contact and those pinning an estimated contact."""
+        return self.in_contact | self.pins_contact
 
     @classmethod
     def from_curves(cls, curves: list[CurveKinematics], noise_inflation: float = 1.0) -> Samples:
@@ -59,6 +67,7 @@ class Samples:
             noise_inflation=noise_inflation,
             segment=cat([c.segment for c in curves]),
             nominal_speed=cat([np.full(len(c.time), c.base_speed) for c in curves]),
+            pins_contact=cat([c.pins_contact for c in curves]),
         )
 
     def join(self, other: Samples) -> Samples:
