@@ -1,5 +1,7 @@
 """ForceModel against the forward simulator: two routes to the same recording, term by term."""
 
+import math
+
 import pytest
 import torch
 
@@ -8,7 +10,7 @@ from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.recordings import load_recordings
 from ptwin.physics.contact import ContactNuisance
 from ptwin.physics.elastic import ReferenceCurve
-from ptwin.physics.model import ForceModel
+from ptwin.physics.model import ForceModel, smooth_contact_radius
 from ptwin.physics.samples import Samples
 from tests.conftest import simulated_set
 
@@ -78,3 +80,33 @@ def test_terms_report_non_physical_values():
     assert VOCABULARY["solid_viscosity"](rho, gamma=-1.0).violation() == "gamma < 0"
     assert VOCABULARY["contact_offset"](rho, delta=4e-6).violation().startswith("|delta|")
     assert VOCABULARY["pore_pressure_relaxation"](rho, M=1e4).violation() is None
+
+
+def test_the_pore_term_says_where_its_force_stops_depending_on_k(tmp_path, coarse_cache):
+    # Undrained (relaxation time ≫ the recordings), F_p → M·U·R whatever K is: the note must fire exactly there.
+    basis_path = next(coarse_cache.glob("*.pt"))
+    folder = simulated_set(tmp_path, base_speeds=(0.5e-6, 40e-6), samples=500, noise_std=0.0)
+    name = "pore_pressure_relaxation"
+    model, samples = model_for(folder, basis_path, (name,), {name: {"M": 3.0e4}})
+    term, use = model.terms[name], samples.in_contact
+    radius = smooth_contact_radius(samples.depth, model.probe_radius)[use].max().item()
+    duration = max(
+        (samples.time[use & (samples.curve == i)].max() - samples.time[use & (samples.curve == i)].min()).item()
+        for i in range(len(samples.curve_ids))
+    )
+    drains_in = model.fluid.viscosity * radius**2 / (3.0e4 * duration)  # K whose relaxation time is the duration
+
+    def fluid(permeability):
+        with torch.no_grad():
+            model.fluid.log_permeability.fill_(math.log(permeability))
+            return model.rate_forces(samples)["fluid"][use]
+
+    def change(permeability):  # relative change of the fluid force when K falls tenfold
+        a, b = fluid(permeability), fluid(permeability / 10)
+        return ((a - b).norm() / a.norm()).item()
+
+    undrained, drained = drains_in / 100, drains_in * 10
+    assert term.permeability_note(undrained, model.fluid.viscosity, radius, duration) is not None
+    assert change(undrained) < 0.02
+    assert term.permeability_note(drained, model.fluid.viscosity, radius, duration) is None
+    assert change(drained) > 0.2

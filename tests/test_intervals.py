@@ -7,6 +7,7 @@ import torch
 from torch import nn
 
 from ptwin.diagnosis.intervals import LEVEL, profile_interval
+from ptwin.diagnosis.words import bounded
 from ptwin.fitting.lm import LevenbergMarquardt
 from ptwin.fitting.physics_fit import PhysicsFit, scaled_residual
 from ptwin.physics.samples import Samples
@@ -78,3 +79,33 @@ def test_a_side_the_data_do_not_close_is_open():
     low, high = profile_interval(fitted, "a", 1.0, samples, index)
     assert high is None
     assert low is not None and low < 8.0
+
+
+def test_a_side_where_the_model_breaks_down_before_the_data_close_it_is_open():
+    # Flat above a = 8 (as the pore term's force at K → 0), and not evaluable beyond a = 20 (as a Darcy force
+    # that overflows): the breakdown is no bound the data set. Bisecting towards it closed this side at ≈ 20.
+    samples = line_samples()
+
+    class Breaking(Line):
+        def forward(self, samples):
+            force = 5.0 - 3.0 * torch.exp(-self.a) + 0 * self.b * samples.time
+            return torch.where(self.a > 20.0, torch.nan, force)
+
+    samples.force[:] = 5.0 - 3.0 * math.exp(-8.0) + 0.1 * torch.randn(len(samples), dtype=torch.float64)
+    model = Breaking()
+    with torch.no_grad():
+        model.a.fill_(8.0)
+    index = torch.arange(len(samples))
+    vector, residual = scaled_residual(model, samples, index)
+    chi_square = residual(vector.get()).square().sum().item()
+    fitted = PhysicsFit((), 1.0, 0.0, {}, {}, {}, {}, chi_square, len(samples), 1, model, 2)
+    low, high = profile_interval(fitted, "a", 1.0, samples, index)
+    assert high is None
+    assert low is not None and low < 8.0
+
+
+def test_an_interval_open_on_one_side_is_said_as_the_bound_alone():
+    assert bounded(2.0e-16, [1.9e-16, 2.1e-16], ".2g", " m²") == "2e-16 m² (95%: 1.9e-16 to 2.1e-16 m²)"
+    assert bounded(6.5e-20, [None, 3.0e-15], ".2g", " m²") == "< 3e-15 m² (95%; the data set no lower limit)"
+    assert bounded(1.0e-9, [2.0e-13, None], ".2g", " m²") == "> 2e-13 m² (95%; the data set no upper limit)"
+    assert bounded(1.0, [None, None]) == "not fixed by these data"

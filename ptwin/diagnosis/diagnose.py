@@ -23,7 +23,7 @@ from ptwin.fitting.physics_fit import PhysicsFit, rmse
 from ptwin.fitting.pointwise import ApparentPermeability
 from ptwin.fitting.split import Split
 from ptwin.physics.elastic import ReferenceCurve
-from ptwin.physics.model import PERMEABILITY
+from ptwin.physics.model import PERMEABILITY, smooth_contact_radius
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
@@ -163,6 +163,7 @@ def diagnose(
     # Failed fits and fits whose terms do nothing say so here; non-physical ones are listed as rejected.
     notes = [*(notes or []), *pick.notes]
     notes += [f"{' + '.join(t) or 'base'}: {c.state}" for t, c in candidates.items() if c.without_effect]
+    notes += _permeability_notes(candidates[pick.chosen].fit, samples)
     fit = _fit_table(samples, split, base, corrected, twin)
     rivals = _rivals(candidates, pick, s)
     confounds = [_confound(chosen, other, candidates) for other in rivals]
@@ -375,11 +376,12 @@ def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: Diag
     implausible = corrected.implausible.get(term)
     verdict = grade(removal, rivals, implausible, held_out, s.bic_margin, s.heldout_margin)
     gain = _test_rmse(without, c.samples, c.split) / c.fit["corrected"]["test_rmse"]
+    intervals = _parameter_intervals(corrected, term, c)
     return {
         "term": term,
         "params": corrected.params[term],
-        "param_std": corrected.param_std[term],
-        "param_interval": _parameter_intervals(corrected, term, c),
+        "param_std": {p: std if None not in intervals[p] else None for p, std in corrected.param_std[term].items()},
+        "param_interval": intervals,
         "confidence": verdict.confidence,
         "evidence": _evidence(term, without, removal, held_out, verdict, c),
         "test_rmse_gain": gain,
@@ -410,12 +412,25 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut |
     return sentence
 
 
+def _permeability_notes(fit: PhysicsFit, samples: Samples) -> list[str]:
+    """Where the fitted terms stop these recordings fixing K (``Term.permeability_note``), in sentences."""
+    model = fit.model
+    with torch.no_grad():
+        radius = smooth_contact_radius(model.depth(samples), model.probe_radius)[samples.in_contact].max().item()
+    spans = [samples.time[(samples.curve == i) & samples.in_contact] for i in range(len(samples.curve_ids))]
+    duration = max((span.max() - span.min()).item() for span in spans if span.numel())
+    viscosity = model.fluid.viscosity
+    notes = [term.permeability_note(fit.permeability, viscosity, radius, duration) for term in model.terms.values()]
+    return [f"{note}." for note in notes if note]
+
+
 def _raw_interval(fit: PhysicsFit, raw_name: str, raw_std: float, c: _Context):
     return profile_interval(fit, raw_name, raw_std, c.samples, c.split.train)
 
 
 def _parameter_intervals(fit: PhysicsFit, term: str, c: _Context) -> dict[str, list[float | None]]:
-    """95% profile-likelihood intervals of the term's parameters, physical units (None: not bounded)."""
+    """95% profile-likelihood intervals of the term's parameters, physical units (None: not bounded), a closed
+    side beyond a physical limit (gamma ≥ 0) drawn back to it."""
     module = fit.model.terms[term]
     intervals = {}
     for name, parameter in module.PARAMS.items():
@@ -423,7 +438,12 @@ def _parameter_intervals(fit: PhysicsFit, term: str, c: _Context) -> dict[str, l
         raw_std = std / abs(value) if parameter.log and value else std
         low, high = _raw_interval(fit, f"terms.{term}.{module.raw_name(name)}", raw_std, c)
         to_value = _exp_or_none if parameter.log else _float_or_none
-        intervals[name] = [to_value(low), to_value(high)]
+        low, high = to_value(low), to_value(high)
+        if low is not None and parameter.minimum is not None:
+            low = max(low, parameter.minimum)
+        if high is not None and parameter.maximum is not None:
+            high = min(high, parameter.maximum)
+        intervals[name] = [low, high]
     return intervals
 
 
@@ -461,6 +481,7 @@ def _permeability(c: _Context, alternatives: list[Candidate], unexplained: bool)
     return {
         "base": c.candidates[()].fit.permeability,
         "corrected": corrected.permeability,
-        "corrected_std": corrected.permeability_std,
+        # The Wald std is the curvature at the fit: along a flat side of the profile it is no statement of the data.
+        "corrected_std": corrected.permeability_std if None not in interval else None,
         "corrected_interval": interval,
     }

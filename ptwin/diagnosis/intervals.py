@@ -9,7 +9,10 @@ model says, as the Wald variance assumes too), and the interval is where it stay
 raw parameter (log K, log M, log tau: asymmetric intervals where the data are) by
 regula falsi (Illinois) on √Δ − √3.84, which is nearly linear in θ, from the Wald step
 outward. A side the data do not close within ``REACH`` steps of ×4 is None: the
-parameter is not bounded there.
+parameter is not bounded there. So is a side where the model stops being evaluable
+before the data close it (e.g. K so small that the Darcy force overflows): a failure of
+the model is no evidence against the parameter, and bisecting towards it would report the
+place where the arithmetic broke as a bound the data set.
 """
 
 from __future__ import annotations
@@ -76,6 +79,8 @@ def _side(excess, first: float) -> float | None:
     outside = first
     for _ in range(REACH):
         g_outside = excess(outside)
+        if math.isinf(g_outside):  # the model broke down first: no evidence of a bound
+            return None
         if g_outside >= 0:
             break
         inside, g_inside, outside = outside, g_outside, outside * 4.0
@@ -83,16 +88,15 @@ def _side(excess, first: float) -> float | None:
         return None
     side = 0
     for _ in range(ITERATIONS):
-        if math.isinf(g_outside):
-            point = 0.5 * (inside + outside)
-        else:
-            point = inside - g_inside * (outside - inside) / (g_outside - g_inside)
+        point = inside - g_inside * (outside - inside) / (g_outside - g_inside)
         g = excess(point)
         if abs(g) < 0.01 * math.sqrt(LEVEL):
             return point
+        if math.isinf(g):
+            return None
         if g < 0:
             inside, g_inside = point, g
-            if side == -1 and math.isfinite(g_outside):
+            if side == -1:
                 g_outside *= 0.5
             side = -1
         else:

@@ -28,8 +28,30 @@ def number(value: float | None, spec: str, missing: str = "not determined") -> s
     return format(value, spec) if value is not None and math.isfinite(value) else missing
 
 
+def bounded(value: float | None, interval, spec: str = ".3g", unit: str = "") -> str:
+    """A fitted value as the data fix it. Both sides of its 95% interval closed: the value and the interval.
+    One side open (a flat profile there): only the bound the data set, '< 3.1e-15 m²', since the fitted
+    value is wherever the flat direction left the fit, not a measurement. Neither: 'not fixed by these data'."""
+    low, high = interval
+    if low is not None and high is not None:
+        return f"{number(value, spec)}{unit} (95%: {low:{spec}} to {high:{spec}}{unit})"
+    if high is not None:
+        return f"< {high:{spec}}{unit} (95%; the data set no lower limit)"
+    if low is not None:
+        return f"> {low:{spec}}{unit} (95%; the data set no upper limit)"
+    return "not fixed by these data"
+
+
 def summarise(d, apparent, test) -> str:
-    """One paragraph a person can read: where the base model misses, and what (if anything) explains it."""
+    """One paragraph a person can read: where the base model misses, what (if anything) explains it, and K
+    where the data bound it on one side only."""
+    low, high = d.permeability["corrected_interval"]
+    one_sided = not d.unexplained and (low is None) != (high is None)
+    bound = f" K {bounded(d.permeability['corrected'], (low, high), '.3g', ' m²')}." if one_sided else ""
+    return _findings(d, apparent, test) + bound
+
+
+def _findings(d, apparent, test) -> str:
     ratio = d.fit["base"]["val_rmse"] / d.noise_floor
     if not d.detected:
         sentence = (

@@ -150,6 +150,11 @@ class Term(nn.Module):
     def elastic_force(self, samples: Samples, elastic: torch.Tensor) -> torch.Tensor | None:
         return None
 
+    def permeability_note(self, permeability: float, viscosity: float, radius: float, duration: float) -> str | None:
+        """Why, at its fitted values, this term leaves K unfixed by the recordings, or None: given K [m²], the fluid's
+        viscosity [Pa s], the deepest contact radius [m] and the longest time a curve is in contact [s]."""
+        return None
+
     def elastic_modes(self, samples: Samples) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
         """A hereditary term (``ACTS_ON_ELASTIC``) as exponential modes on the time scales of ``samples``:
         (extra, weights (M,), relaxation times (M,) [s]) with elastic_force(F) = extra·(F − F(0)) +
@@ -214,6 +219,9 @@ class PowerLawRheology(Term):
         return c0 - 1, weights, times
 
 
+UNDRAINED = 10.0  # relaxation time over the longest contact beyond which a pore pressure never drains in it
+
+
 class PorePressureRelaxation(Term):
     """Finite drainage: F_D → F_p, tau_p dF_p/dt + F_p = F_D, tau_p = μR²/(K M) (M [Pa])."""
 
@@ -225,6 +233,19 @@ class PorePressureRelaxation(Term):
     def lag_fluid(self, fluid_force, samples, radius, permeability, viscosity):
         relaxation_time = viscosity * radius**2 / (permeability * self.value("M"))
         return first_order_lag(fluid_force, relaxation_time, samples.time, samples.start)
+
+    def permeability_note(self, permeability, viscosity, radius, duration):
+        # Undrained (tau_p ≫ t): F_p ≈ (1/tau_p)∫F_D dt, and F_D ∝ μ·U·R³/K times 1/tau_p = K·M/(μR²) is M·U·R:
+        # K cancels, so only a K large enough to drain within the recordings is excluded.
+        relaxation_time = viscosity * radius**2 / (permeability * self.value("M").item())
+        if relaxation_time < UNDRAINED * duration:
+            return None
+        return (
+            f"{self.name}: its relaxation time μR²/(K·M) = {relaxation_time:.3g} s at the deepest contact is "
+            f"{relaxation_time / duration:.0f}× the longest time a curve is in contact ({duration:.3g} s). The pore "
+            "pressure never drains in these recordings, where its force no longer depends on K (it tends to M·U·R), so "
+            f"they bound K from above at most; a hold of a few {relaxation_time:.2g} s would fix K"
+        )
 
 
 class StrainDependentPermeability(Term):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ptwin.diagnosis.words import number
+from ptwin.diagnosis.words import bounded, number
 
 NANO = 1e9
 LABELS = {"elastic_darcy": "1 elastic + Darcy", "viscous": "2 + viscous (K, gamma)", "hybrid": "3 hybrid twin"}
@@ -20,11 +20,6 @@ def _k(value, std=None) -> str:
 
 def _nano(value) -> str:
     return number(None if value is None else value * NANO, ".3f")
-
-
-def _interval(interval, scale: float = 1.0) -> str:
-    low, high = (None if v is None else v * scale for v in interval)
-    return f"[{number(low, '.3g', 'unbounded')}, {number(high, '.3g', 'unbounded')}]"
 
 
 def summary_rows(results: dict) -> list[tuple[str, str, str, str]]:
@@ -42,7 +37,10 @@ def print_summary(results: dict, diagnosis: dict, progress=print) -> None:
     rows = summary_rows(results)
     fit = diagnosis["fit"]["corrected"]
     permeability = diagnosis["permeability"]
+    low, high = permeability["corrected_interval"]
     corrected = _k(permeability["corrected"], permeability["corrected_std"])
+    if (low is None) != (high is None):  # one side open: the bound is all the data say
+        corrected = f"< {high:.4g}" if low is None else f"> {low:.4g}"
     rows.append(("diagnosis: corrected", corrected, _nano(fit["val_rmse"]), _nano(fit["test_rmse"])))
     progress(f"{'stage':<26s} {'K [m²]':>24s} {'val RMSE nN':>12s} {'test RMSE nN':>13s}")
     for row in rows:
@@ -82,10 +80,7 @@ def _where(payload: dict) -> list[str]:
 def _left_out(payload: dict) -> list[str]:
     lines = []
     for entry in payload["left_out"]:
-        params = ", ".join(
-            f"{k} = {number(v, '.4g')} (95%: {_interval(entry['param_interval'][k])})"
-            for k, v in entry["params"].items()
-        )
+        params = ", ".join(f"{k} {bounded(v, entry['param_interval'][k], '.4g')}" for k, v in entry["params"].items())
         lines += [
             f"**Left out: `{entry['term']}`**, confidence **{entry['confidence']}** ({params}; test RMSE gain "
             f"{number(entry['test_rmse_gain'], '.2f')}×).",
@@ -145,8 +140,7 @@ def _fit(payload: dict) -> list[str]:
         f"Noise: std {_nano(noise['std'])} nN, correlation time {correlation} ms, block-variance inflation "
         f"{number(noise['inflation'], '.2f')} (from the {noise['source']}); every statistic above uses it.",
         "",
-        f"Permeability: base {number(p['base'], '.4g')} m², corrected {_k(p['corrected'], p['corrected_std'])} m², "
-        f"95% interval {_interval(p['corrected_interval'])} m².",
+        f"Permeability: base {number(p['base'], '.4g')} m², corrected {_corrected_k(payload)}.",
         "",
         "| model | val RMSE [nN] | test RMSE [nN] | test / noise std |",
         "|---|---|---|---|",
@@ -155,6 +149,14 @@ def _fit(payload: dict) -> list[str]:
         ratio = None if fit["test_rmse"] is None else fit["test_rmse"] / noise["std"]
         lines.append(f"| {name} | {_nano(fit['val_rmse'])} | {_nano(fit['test_rmse'])} | {number(ratio, '.2f')} |")
     return [*lines, ""]
+
+
+def _corrected_k(payload: dict) -> str:
+    """The corrected K as the data fix it; none from a model that leaves the data unexplained."""
+    p = payload["permeability"]
+    if payload["unexplained"]:
+        return f"{number(p['corrected'], '.4g')} m² (from a model that misses the data: no interval holds)"
+    return bounded(p["corrected"], p["corrected_interval"], ".4g", " m²")
 
 
 def _chain(results: dict) -> list[str]:
