@@ -146,7 +146,7 @@ def diagnose(
     trained hybrid twin, whose learned error the named terms are compared with (None: not trained);
     ``reference``: the elastic law, whose noise every residual shares (the whiteness test's null)."""
     s = settings
-    seen = torch.cat([split.train, split.val]).sort().values
+    seen = split.judged(samples)
     test = structure_test(samples, seen, reference, noise, s.block, s.false_alarm)
     progress("diagnosis: fitting the base model and the candidate terms (K refitted with each)")
     fitted = {(): base_fit} if base_fit is not None else None

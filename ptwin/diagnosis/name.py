@@ -80,7 +80,7 @@ def fit_candidates(
     ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are.
     """
     fitted = fitted or {}
-    seen = torch.cat([split.train, split.val]).sort().values
+    seen = split.judged(samples)
     candidates = {}
 
     def add(subset):

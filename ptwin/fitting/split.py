@@ -17,6 +17,13 @@ class Split:
     test: torch.Tensor
     held_out_curve: str | None = None
 
+    def judged(self, samples: Samples) -> torch.Tensor:
+        """The train and validation samples in contact: where a residual's structure is judged. The samples
+        pinning an estimated contact are fitted, not judged: just before contact a real force leaves the
+        baseline line (long-range forces, a curved virtual deflection), which is no physics left out."""
+        seen = torch.cat([self.train, self.val]).sort().values
+        return seen[samples.in_contact[seen]]
+
 
 def split_samples(
     samples: Samples,
