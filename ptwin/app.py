@@ -1,6 +1,6 @@
-"""What the Hydra faces share (``train.py``, ``python -m ptwin.map``, ``python -m ptwin.pgd``): the typed settings
-registered as the configs' schema, their conversion to dataclasses, and one line on
-stderr for anything that ends a run: exit code 2 for what a user can fix (bad
+"""What the Hydra faces share (``train.py``, ``python -m ptwin.map``, ``python -m ptwin.inject``,
+``python -m ptwin.pgd``): the typed settings registered as the configs' schema, their conversion to
+dataclasses, and one line on stderr for anything that ends a run: exit code 2 for what a user can fix (bad
 recordings, a set that cannot support a diagnosis, a damaged or foreign checkpoint, an
 impossible setting, a Dask scheduler that does not answer), 3 for anything else, its
 traceback kept in the run directory."""
@@ -21,7 +21,7 @@ from ptwin.data.recordings import RecordingError
 from ptwin.files import StoredFileError
 from ptwin.pgd.config import PGDConfig
 from ptwin.pipeline.engine import EngineError
-from ptwin.pipeline.settings import MapRunSettings, Settings
+from ptwin.pipeline.settings import InjectRunSettings, MapRunSettings, Settings
 
 
 @dataclass
@@ -38,15 +38,18 @@ class SettingsError(ValueError):
 
 
 def register() -> None:
-    """Register the primary configs' schemas (``train_schema``, ``map_schema``, ``pgd_build_schema``)."""
+    """Register the primary configs' schemas (``train_schema``, ``map_schema``, ``inject_schema``,
+    ``pgd_build_schema``)."""
     store = ConfigStore.instance()
     store.store(name="train_schema", node=Settings)
     store.store(name="map_schema", node=MapRunSettings)
+    store.store(name="inject_schema", node=InjectRunSettings)
     store.store(name="pgd_build_schema", node=BuildSettings)
 
 
 def typed(cfg: DictConfig):
-    """The composed config as its schema's dataclass (``Settings``, ``MapRunSettings`` or ``BuildSettings``)."""
+    """The composed config as its schema's dataclass (``Settings``, ``MapRunSettings``, ``InjectRunSettings`` or
+    ``BuildSettings``)."""
     try:
         return OmegaConf.to_object(cfg)
     except ValueError as error:

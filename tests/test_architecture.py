@@ -18,7 +18,7 @@ LAYERS = [
     ("reporting",),
     ("pipeline",),
     ("app",),
-    ("map",),  # a Hydra face, on what app.py shares
+    ("map", "inject"),  # the Hydra faces, on what app.py shares
 ]
 RANK = {room: rank for rank, rooms in enumerate(LAYERS) for room in rooms}
 MODULES = sorted((ROOT / "ptwin").rglob("*.py"))

@@ -11,6 +11,7 @@ from ptwin.diagnosis.diagnose import DiagnosisSettings
 from ptwin.fitting.hybrid import check_network
 from ptwin.fitting.hybrid_training import HybridSettings
 from ptwin.pgd.config import PGDConfig
+from ptwin.physics.terms import VOCABULARY
 
 
 @dataclass
@@ -94,3 +95,37 @@ class MapRunSettings(Settings):
     """Everything ``python -m ptwin.map`` runs on: a spot's settings (``data.path`` is the map's folder)."""
 
     map: MapSettings = field(default_factory=MapSettings)
+
+
+@dataclass
+class InjectSettings:
+    """What ``python -m ptwin.inject`` adds to a recording set (the ``inject`` config group): ``term`` at
+    ``params`` (every parameter of the term), scaled by each of ``sizes`` in its first parameter (its strength:
+    gamma, g, alpha, m, b; M for the pore term), one diagnosis each."""
+
+    term: str = "solid_viscosity"
+    params: dict[str, float] = field(default_factory=lambda: {"gamma": 5.0})
+    sizes: list[float] = field(default_factory=lambda: [1.0])
+
+    def __post_init__(self):
+        if self.term not in VOCABULARY:
+            raise ValueError(f"inject.term {self.term!r} is not in the vocabulary; pick one of {', '.join(VOCABULARY)}")
+        wanted = set(VOCABULARY[self.term].PARAMS)
+        if set(self.params) != wanted:
+            raise ValueError(
+                f"inject.params of {self.term} must give exactly {sorted(wanted)}, got {sorted(self.params)}"
+            )
+        if not self.sizes or min(self.sizes) <= 0:
+            raise ValueError(f"inject.sizes must be positive multiples of the term's strength, got {list(self.sizes)}")
+
+    def scaled(self, size: float) -> dict[str, float]:
+        """The term's parameters with its strength (first parameter) times ``size``."""
+        strength = next(iter(VOCABULARY[self.term].PARAMS))
+        return {name: value * size if name == strength else value for name, value in self.params.items()}
+
+
+@dataclass
+class InjectRunSettings(Settings):
+    """Everything ``python -m ptwin.inject`` runs on: the diagnosis's settings and what to add."""
+
+    inject: InjectSettings = field(default_factory=InjectSettings)

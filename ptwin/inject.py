@@ -1,0 +1,32 @@
+"""python -m ptwin.inject data.path=SET inject.term=TERM inject.params={…} inject.sizes=[…] [overrides]
+
+What the user's own recordings could have shown: the term added to them at first order through the
+cantilever balance (everything else as recorded; method and limits in ``ptwin.pipeline.inject``), at
+each size, and diagnosed as ``train.py`` would. Writes ``as-recorded/`` (the recordings' own run, its
+report.md ending with the section on what they could have shown) and ``size-<s>/`` (the recordings
+with the term added, and their run) under the run directory.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig
+
+from ptwin.app import one_line_errors, register, typed
+from ptwin.pipeline.inject import detection
+
+register()
+
+
+@hydra.main(version_base="1.3", config_path="../configs", config_name="inject")
+def main(cfg: DictConfig) -> None:
+    output_dir = Path(HydraConfig.get().runtime.output_dir)
+    with one_line_errors(output_dir):
+        detection(typed(cfg), output_dir)
+
+
+if __name__ == "__main__":
+    main()

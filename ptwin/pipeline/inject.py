@@ -1,0 +1,150 @@
+"""What a recording set could have shown: a known term added to the user's own recordings, the rest real.
+
+Method. The base model, K fitted on the set's training samples, gives the term's force ΔF on each
+curve's recorded history: every rate force with the term minus without it, on the elastic force of
+the base model's law (the hereditary terms act on it), at the base fit's contact corrections. A
+force added at the tip does not reach the recording whole: cantilever and sample share it. At first
+order in ΔF, the balance k_c·(z − w) = F(w, …) with z as recorded gives δF = ΔF·k_c/(k_c + s), s =
+dF_el/dw the sample's contact stiffness (0 before contact: all of ΔF is deflection there). δF is added
+to the recorded force; z, time and the noise stay as recorded, and the depth follows (w = z − F/k_c).
+
+Limits. First order: where δF changes the depth enough to change ΔF or s (δF/k_c not small against
+the depth over which they vary) the term is added approximately. The term adds to whatever the
+recordings hold already, so each size is read against the diagnosis of the recordings as they are.
+It is added on the base model's K, even where the data do not fix K.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ptwin.data.recordings import write_recordings
+from ptwin.diagnosis.words import bounded, number
+from ptwin.fitting.physics_fit import fit_physics
+from ptwin.physics.model import total
+from ptwin.physics.samples import Samples
+from ptwin.physics.terms import VOCABULARY
+from ptwin.pipeline.prepare import Prepared, prepare
+from ptwin.pipeline.run import run
+from ptwin.pipeline.settings import InjectRunSettings
+
+
+@dataclass
+class Trial:
+    """One diagnosis of the recordings with the term added at ``size`` times its strength (0: as recorded)."""
+
+    size: float
+    added: float | None  # the strength added, in its unit (None: as recorded)
+    peak: float  # the largest added force over the noise std
+    confidence: str  # the term's, if named; '' if not
+    found: float | None  # the strength fitted, if named
+    interval: list  # its 95% interval
+    unexplained: bool
+
+    def verdict(self, strength: str, native: float) -> str:
+        """What the diagnosis said of the term, in words; ``native``: the strength found as recorded."""
+        if not self.confidence:
+            return "unexplained" if self.unexplained else "not named"
+        found = bounded(self.found, self.interval, ".3g")
+        size = "" if self.added is None else f"; {number(self.found - native, '.3g')} over the recordings' own"
+        return f"named ({self.confidence}), {strength} {found}{size}"
+
+
+def added_force(prepared: Prepared, term: str, params: dict[str, float]) -> dict[str, np.ndarray]:
+    """δF [N] of every curve (the reference too: the term acts on all), per sample in file order."""
+    fit = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+    base = fit.model
+    with_term = prepared.make_model((term,), {term: params}, fit.permeability)
+    with_term.contact = base.contact  # the base fit's contact corrections
+    samples = Samples.from_curves(prepared.curves).to(prepared.samples.time.device)
+    step = (base.reference.depth_nodes[1] - base.reference.depth_nodes[0]).item()
+    with torch.no_grad():
+        depth = base.depth(samples)
+        elastic = base.elastic(depth)
+        delta = total(with_term.rate_forces(samples, elastic)) - total(base.rate_forces(samples, elastic))
+        slope = (base.elastic(depth + step) - base.elastic(depth - step)) / (2 * step)
+        stiffness = torch.where(depth > 0, slope.clamp(min=0.0), torch.zeros_like(slope))
+    spring = prepared.recordings.meta.spring_constant
+    measured = (delta * spring / (spring + stiffness)).cpu().numpy()
+    curve = samples.curve.cpu().numpy()
+    return {curve_id: measured[curve == i] for i, curve_id in enumerate(samples.curve_ids)}
+
+
+def write_injected(prepared: Prepared, term: str, params: dict[str, float], folder: Path) -> float:
+    """The recordings with ``term`` at ``params`` added, written into ``folder``; the peak δF over the noise std."""
+    frame = prepared.recordings.curves.copy()
+    peak = 0.0
+    for curve_id, force in added_force(prepared, term, params).items():
+        rows = (frame["curve"] == curve_id).to_numpy()
+        frame.loc[rows, "force"] = frame.loc[rows, "force"].to_numpy() + force
+        peak = max(peak, float(np.abs(force).max()))
+    meta = prepared.recordings.meta
+    added = ", ".join(f"{name} {value:.3g}" for name, value in params.items())
+    note = f"ptwin.inject: {term} ({added}) added to {prepared.recordings.path}"
+    write_recordings(folder, replace(meta, notes=f"{meta.notes}; {note}" if meta.notes else note), frame)
+    return peak / prepared.noise.std
+
+
+def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[[str], None] = print) -> list[Trial]:
+    """Diagnose the recordings as they are, then with the term added at each size; the report of the first
+    gets a section on what these recordings could have shown."""
+    inject, quiet = settings.inject, lambda _: None
+    strength = next(iter(VOCABULARY[inject.term].PARAMS))
+    progress(f"inject: the recordings as they are ({len(inject.sizes) + 1} diagnoses in all)")
+    as_recorded = run(settings, output_dir / "as-recorded", quiet)
+    trials = [_trial(0.0, None, 0.0, as_recorded.diagnosis, inject.term, strength)]
+    native = trials[0].found if trials[0].confidence else 0.0
+    progress(f"  as recorded: {trials[0].verdict(strength, native)}")
+    prepared = prepare(settings, quiet)
+    for i, size in enumerate(sorted(inject.sizes), start=1):
+        params = inject.scaled(size)
+        folder = output_dir / f"size-{size:g}"
+        peak = write_injected(prepared, inject.term, params, folder / "recordings")
+        data = replace(settings.data, path=str(folder / "recordings"))
+        outcome = run(replace(settings, data=data), folder / "run", quiet)
+        trials.append(_trial(size, params[strength], peak, outcome.diagnosis, inject.term, strength))
+        verdict = trials[-1].verdict(strength, native)
+        added = f"{strength} {params[strength]:.3g} added (peak {peak:.1f}× the noise)"
+        progress(f"  [{i}/{len(inject.sizes)}] {added}: {verdict}")
+    section = detection_section(inject.term, strength, trials)
+    with (output_dir / "as-recorded" / "report.md").open("a") as report:
+        report.write("\n" + "\n".join(section) + "\n")
+    progress("\n".join(section[-1:]))
+    return trials
+
+
+def _trial(size: float, added: float | None, peak: float, diagnosis: dict, term: str, strength: str) -> Trial:
+    entry = next((e for e in diagnosis["left_out"] if e["term"] == term), None)
+    if entry is None:
+        return Trial(size, added, peak, "", None, [None, None], diagnosis["unexplained"])
+    value, interval = entry["params"][strength], entry["param_interval"][strength]
+    return Trial(size, added, peak, entry["confidence"], value, interval, diagnosis["unexplained"])
+
+
+def detection_section(term: str, strength: str, trials: list[Trial]) -> list[str]:
+    """report.md's section: each size added, the verdict, and the smallest size named."""
+    native = trials[0].found if trials[0].confidence else 0.0
+    lines = [
+        "## What these recordings could have shown",
+        "",
+        f"`{term}` added to these recordings at first order through the cantilever balance, everything else as "
+        "recorded (`python -m ptwin.inject`; method and limits in `ptwin/pipeline/inject.py`).",
+        "",
+        f"| {strength} added | peak added force / noise std | verdict |",
+        "|---|---|---|",
+    ]
+    for trial in trials:
+        added = "as recorded" if trial.added is None else f"{trial.added:.3g}"
+        lines.append(f"| {added} | {trial.peak:.1f} | {trial.verdict(strength, native)} |")
+    named = [t for t in trials[1:] if t.confidence]
+    smallest = (
+        f"The smallest {strength} named: {named[0].added:.3g} (peak {named[0].peak:.1f}× the noise std)."
+        if named
+        else f"No size tried was named: these recordings do not show {term} at {strength} up to {trials[-1].added:.3g}."
+    )
+    return [*lines, "", smallest]

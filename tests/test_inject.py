@@ -1,0 +1,62 @@
+"""What a set could have shown: a known term added to recordings at first order through the cantilever balance,
+found with its size; and on data ptwin did not write (a shared development set with real PAAm noise)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+
+from ptwin.app import register, typed
+from ptwin.data.recordings import load_recordings
+from ptwin.pipeline.inject import added_force, detection
+from ptwin.pipeline.prepare import prepare
+from tests.conftest import CONFIGS, simulated_set
+
+QUICK = ("optim.hybrid.regularisations=[1.0e-2]", "optim.hybrid.iterations=10")
+SHARED_NULL = Path(__file__).resolve().parents[2] / "shared" / "bench-sets" / "p03_null_real_paam_noise" / "data"
+
+
+def inject_settings(folder, cache, *overrides):
+    register()
+    with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
+        cfg = compose("inject", [f"data.path={folder}", "pgd=coarse", f"cache_dir={cache}", *QUICK, *overrides])
+    return typed(cfg)
+
+
+def test_a_viscous_force_added_reaches_the_recording_through_the_cantilever_balance(tmp_path, coarse_cache):
+    # πγRU at the tip; the recording sees k/(k + s) of it, s the contact stiffness: less where the sample is stiff.
+    settings = inject_settings(simulated_set(tmp_path / "set"), coarse_cache)
+    prepared = prepare(settings, progress=lambda _: None)
+    added = added_force(prepared, "solid_viscosity", {"gamma": 5.0})
+    fast = next(c for c in prepared.curves if c.curve == "v80")
+    shown = added["v80"]
+    contact = fast.in_contact
+    assert np.all(shown[fast.depth <= 0] == 0.0)  # no contact radius, no viscous force
+    tip = np.pi * 5.0 * fast.contact_radius[contact] * fast.velocity[contact]
+    ratio = shown[contact] / tip
+    k = prepared.recordings.meta.spring_constant
+    assert np.all((ratio > 0) & (ratio <= 1.0 + 1e-9))
+    stiffness = k * (1 / ratio - 1)  # s = dF/dw of the sphere: grows like √w, so the share falls with depth
+    deep = fast.depth[contact] > 0.5 * fast.depth.max()
+    assert np.median(stiffness[deep]) > np.median(stiffness[~deep])
+
+
+def test_a_viscosity_added_to_a_set_is_found_with_its_size(tmp_path, coarse_cache):
+    settings = inject_settings(simulated_set(tmp_path / "set"), coarse_cache, "inject.sizes=[1.0]")
+    trials = detection(settings, tmp_path / "run", progress=lambda _: None)
+    as_recorded, added = trials
+    assert not as_recorded.confidence  # the clean set names nothing
+    assert added.confidence and added.found == pytest.approx(5.0, rel=0.4)
+    report = (tmp_path / "run" / "as-recorded" / "report.md").read_text()
+    assert "## What these recordings could have shown" in report and "The smallest gamma named: 5" in report
+    injected = load_recordings(tmp_path / "run" / "size-1" / "recordings")
+    assert "ptwin.inject: solid_viscosity (gamma 5) added" in injected.meta.notes
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not SHARED_NULL.is_dir(), reason="the shared development sets (../shared/bench-sets) are absent")
+def test_a_viscosity_added_to_real_noise_is_named(tmp_path, coarse_cache):
+    settings = inject_settings(SHARED_NULL, coarse_cache, "inject.sizes=[2.0]")
+    trials = detection(settings, tmp_path / "run", progress=lambda _: None)
+    assert trials[-1].confidence  # 63× the noise at its peak
