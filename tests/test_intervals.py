@@ -60,46 +60,40 @@ def test_the_profile_of_a_linear_model_is_the_textbook_interval_times_the_noise_
     assert high == pytest.approx(b + half, rel=1e-3)
 
 
-def test_a_side_the_data_do_not_close_is_open():
-    # y depends on a only through exp(−a): large a all look alike, so the interval is open above.
+class Saturating(Line):
+    """y depends on a only through exp(−a): large a all look alike (as the pore term's force at K → 0)."""
+
+    breaks_above = math.inf  # beyond it the model is not evaluable (as a Darcy force that overflows)
+
+    def forward(self, samples):
+        force = 5.0 - 3.0 * torch.exp(-self.a) + 0 * self.b * samples.time
+        return torch.where(self.a > self.breaks_above, torch.nan, force)
+
+
+def saturated_interval(model: Saturating):
+    """The interval of a on data made at a = 8."""
     samples = line_samples()
-
-    class Saturating(Line):
-        def forward(self, samples):
-            return 5.0 - 3.0 * torch.exp(-self.a) + 0 * self.b * samples.time
-
     samples.force[:] = 5.0 - 3.0 * math.exp(-8.0) + 0.1 * torch.randn(len(samples), dtype=torch.float64)
-    model = Saturating()
     with torch.no_grad():
         model.a.fill_(8.0)
     index = torch.arange(len(samples))
     vector, residual = scaled_residual(model, samples, index)
     chi_square = residual(vector.get()).square().sum().item()
     fitted = PhysicsFit((), 1.0, 0.0, {}, {}, {}, {}, chi_square, len(samples), 1, model, 2)
-    low, high = profile_interval(fitted, "a", 1.0, samples, index)
+    return profile_interval(fitted, "a", 1.0, samples, index)
+
+
+def test_a_side_the_data_do_not_close_is_open():
+    low, high = saturated_interval(Saturating())
     assert high is None
     assert low is not None and low < 8.0
 
 
 def test_a_side_where_the_model_breaks_down_before_the_data_close_it_is_open():
-    # Flat above a = 8 (as the pore term's force at K → 0), and not evaluable beyond a = 20 (as a Darcy force
-    # that overflows): the breakdown is no bound the data set. Bisecting towards it closed this side at ≈ 20.
-    samples = line_samples()
-
-    class Breaking(Line):
-        def forward(self, samples):
-            force = 5.0 - 3.0 * torch.exp(-self.a) + 0 * self.b * samples.time
-            return torch.where(self.a > 20.0, torch.nan, force)
-
-    samples.force[:] = 5.0 - 3.0 * math.exp(-8.0) + 0.1 * torch.randn(len(samples), dtype=torch.float64)
-    model = Breaking()
-    with torch.no_grad():
-        model.a.fill_(8.0)
-    index = torch.arange(len(samples))
-    vector, residual = scaled_residual(model, samples, index)
-    chi_square = residual(vector.get()).square().sum().item()
-    fitted = PhysicsFit((), 1.0, 0.0, {}, {}, {}, {}, chi_square, len(samples), 1, model, 2)
-    low, high = profile_interval(fitted, "a", 1.0, samples, index)
+    # The breakdown at a = 20 is no bound the data set; bisecting towards it closed this side at ≈ 20.
+    model = Saturating()
+    model.breaks_above = 20.0
+    low, high = saturated_interval(model)
     assert high is None
     assert low is not None and low < 8.0
 
