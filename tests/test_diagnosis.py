@@ -5,6 +5,7 @@ import json
 import pytest
 
 from ptwin.diagnosis.locate import whiteness
+from ptwin.fitting.split import Split
 
 pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 
@@ -118,8 +119,8 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
     monkeypatch.setattr(name, "rmse", lambda *args: 1.0)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
-    samples = type("Samples", (), {"force": torch.zeros(10)})()
-    split = type("Split", (), {"train": torch.arange(5), "val": torch.arange(5, 8)})()
+    samples = type("Samples", (), {"force": torch.zeros(10), "in_contact": torch.ones(10, dtype=torch.bool)})()
+    split = Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
     name.fit_candidates(None, samples, split, ["a", "b", "c"], max_terms, 1, 50, ABOVE_FIVE, progress=lambda line: None)
     assert max(len(t) for t in fitted) == largest
     assert sum(len(t) == largest for t in fitted) == {1: 3, 2: 3, 3: 1}[largest]
@@ -149,8 +150,8 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
     monkeypatch.setattr(name, "rmse", lambda *args: 1.0)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
-    samples = type("Samples", (), {"force": torch.zeros(10)})()
-    split = type("Split", (), {"train": torch.arange(5), "val": torch.arange(5, 8)})()
+    samples = type("Samples", (), {"force": torch.zeros(10), "in_contact": torch.ones(10, dtype=torch.bool)})()
+    split = Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
     name.fit_candidates(None, samples, split, ["a", "b", "c"], 2, 1, 50, ABOVE_FIVE, progress=lambda line: None)
     assert max(len(t) for t in fitted) == largest
 
