@@ -1,4 +1,4 @@
-"""python -m ptwin.inject data.path=SET inject.term=TERM inject.params={…} inject.sizes=[…] [overrides]
+"""python -m ptwin.inject data.path=SET inject.term=TERM inject.values=[…] inject.sizes=[…] [overrides]
 
 What the user's own recordings could have shown: the term added to them at first order through the
 cantilever balance (everything else as recorded; method and limits in ``ptwin.pipeline.inject``), at

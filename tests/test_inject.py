@@ -60,3 +60,11 @@ def test_a_viscosity_added_to_real_noise_is_named(tmp_path, coarse_cache):
     settings = inject_settings(SHARED_NULL, coarse_cache, "inject.sizes=[2.0]")
     trials = detection(settings, tmp_path / "run", progress=lambda _: None)
     assert trials[-1].confidence  # 63× the noise at its peak
+
+
+def test_values_that_do_not_match_the_terms_parameters_are_refused_in_one_line():
+    from ptwin.pipeline.settings import InjectSettings
+
+    assert InjectSettings("solid_relaxation", [0.2, 0.1]).scaled(2.0) == {"g": 0.4, "tau": 0.1}
+    with pytest.raises(ValueError, match=r"inject.values of solid_relaxation are its parameters in the order"):
+        InjectSettings("solid_relaxation", [5.0])

@@ -99,29 +99,31 @@ class MapRunSettings(Settings):
 
 @dataclass
 class InjectSettings:
-    """What ``python -m ptwin.inject`` adds to a recording set (the ``inject`` config group): ``term`` at
-    ``params`` (every parameter of the term), scaled by each of ``sizes`` in its first parameter (its strength:
-    gamma, g, alpha, m, b; M for the pore term), one diagnosis each."""
+    """What ``python -m ptwin.inject`` adds to a recording set (the ``inject`` config group): ``term`` with
+    ``values``, its parameters in the vocabulary's order (a list, so that an override replaces it whole:
+    Hydra merges a dict key by key and refuses another term's keys), scaled by each of ``sizes`` in its
+    first parameter (its strength: gamma, g, alpha, m, b; M for the pore term), one diagnosis each."""
 
     term: str = "solid_viscosity"
-    params: dict[str, float] = field(default_factory=lambda: {"gamma": 5.0})
+    values: list[float] = field(default_factory=lambda: [5.0])
     sizes: list[float] = field(default_factory=lambda: [1.0])
 
     def __post_init__(self):
         if self.term not in VOCABULARY:
             raise ValueError(f"inject.term {self.term!r} is not in the vocabulary; pick one of {', '.join(VOCABULARY)}")
-        wanted = set(VOCABULARY[self.term].PARAMS)
-        if set(self.params) != wanted:
+        names = list(VOCABULARY[self.term].PARAMS)
+        if len(self.values) != len(names):
             raise ValueError(
-                f"inject.params of {self.term} must give exactly {sorted(wanted)}, got {sorted(self.params)}"
+                f"inject.values of {self.term} are its parameters in the order {names}: give {len(names)}, "
+                f"got {list(self.values)}"
             )
         if not self.sizes or min(self.sizes) <= 0:
             raise ValueError(f"inject.sizes must be positive multiples of the term's strength, got {list(self.sizes)}")
 
     def scaled(self, size: float) -> dict[str, float]:
-        """The term's parameters with its strength (first parameter) times ``size``."""
-        strength = next(iter(VOCABULARY[self.term].PARAMS))
-        return {name: value * size if name == strength else value for name, value in self.params.items()}
+        """The term's parameters by name, its strength (first parameter) times ``size``."""
+        names = list(VOCABULARY[self.term].PARAMS)
+        return {name: value * size if i == 0 else value for i, (name, value) in enumerate(zip(names, self.values))}
 
 
 @dataclass
