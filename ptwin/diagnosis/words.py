@@ -28,6 +28,12 @@ def number(value: float | None, spec: str, missing: str = "not determined") -> s
     return format(value, spec) if value is not None and math.isfinite(value) else missing
 
 
+def one_sided(interval) -> bool:
+    """The data close one side of this 95% interval and not the other: a bound, no value."""
+    low, high = interval
+    return (low is None) != (high is None)
+
+
 def bounded(value: float | None, interval, spec: str = ".3g", unit: str = "") -> str:
     """A fitted value as the data fix it. Both sides of its 95% interval closed: the value and the interval.
     One side open (a flat profile there): only the bound the data set, '< 3.1e-15 m²', since the fitted
@@ -45,9 +51,8 @@ def bounded(value: float | None, interval, spec: str = ".3g", unit: str = "") ->
 def summarise(d, apparent, test) -> str:
     """One paragraph a person can read: where the base model misses, what (if anything) explains it, and K
     where the data bound it on one side only."""
-    low, high = d.permeability["corrected_interval"]
-    one_sided = not d.unexplained and (low is None) != (high is None)
-    bound = f" K {bounded(d.permeability['corrected'], (low, high), '.3g', ' m²')}." if one_sided else ""
+    interval = d.permeability["corrected_interval"]
+    bound = f" K {bounded(d.permeability['corrected'], interval, '.3g', ' m²')}." if one_sided(interval) else ""
     return _findings(d, apparent, test) + bound
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ptwin.diagnosis.words import bounded, number
+from ptwin.diagnosis.words import bounded, number, one_sided
 
 NANO = 1e9
 LABELS = {"elastic_darcy": "1 elastic + Darcy", "viscous": "2 + viscous (K, gamma)", "hybrid": "3 hybrid twin"}
@@ -39,7 +39,7 @@ def print_summary(results: dict, diagnosis: dict, progress=print) -> None:
     permeability = diagnosis["permeability"]
     low, high = permeability["corrected_interval"]
     corrected = _k(permeability["corrected"], permeability["corrected_std"])
-    if (low is None) != (high is None):  # one side open: the bound is all the data say
+    if one_sided((low, high)):  # the bound is all the data say
         corrected = f"< {high:.4g}" if low is None else f"> {low:.4g}"
     rows.append(("diagnosis: corrected", corrected, _nano(fit["val_rmse"]), _nano(fit["test_rmse"])))
     progress(f"{'stage':<26s} {'K [m²]':>24s} {'val RMSE nN':>12s} {'test RMSE nN':>13s}")
