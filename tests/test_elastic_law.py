@@ -66,3 +66,20 @@ def test_relaxation_on_the_reference_curve_is_solved_to_its_fixed_point(referenc
     relaxation = term.elastic_force(nodes, elastic).abs().max()
     assert relaxation > 0.02 * unrelaxed.abs().max()  # the relaxation matters on this curve ...
     assert residual.abs().max() < 1e-4 * unrelaxed.abs().max()  # ... and is solved for, not applied once
+
+
+def test_beyond_the_reference_the_law_continues_as_a_sphere(reference):
+    # Nodes on a Hertz law: the continuation (a line in w^1.5 through the deepest nodes) is exact up to 25%
+    # deeper, where the old continuation (the last segment, linear in w) is off by 1.6% at the far end.
+    e, curve = reference
+    law = ReferenceCurve(curve)
+    nodes = torch.from_numpy(hertz_force(law.depth_nodes.numpy(), e.effective_modulus, e.probe_radius))
+    depth = torch.linspace(law.deepest, law.known_depth, 20, dtype=torch.float64)
+    hertz = torch.from_numpy(hertz_force(depth.numpy(), e.effective_modulus, e.probe_radius))
+    torch.testing.assert_close(law.interpolate(nodes, depth), hertz, rtol=1e-12, atol=0)
+    index, t = law.bracket(depth)
+    last_segment = torch.lerp(nodes[index], nodes[index + 1], t)
+    assert (last_segment / hertz - 1).abs().max() > 0.015
+    # Trailing axes (the null distribution's replicates) are carried column by column.
+    columns = torch.stack([nodes, 2 * nodes], dim=1)
+    torch.testing.assert_close(law.interpolate(columns, depth), torch.stack([hertz, 2 * hertz], dim=1))

@@ -8,12 +8,14 @@ import torch
 
 import ptwin
 from ptwin.data.kinematics import curve_kinematics, segmented_derivative
-from ptwin.data.recordings import load_recordings, write_recordings
+from ptwin.data.recordings import APPROACH, HOLD, load_recordings, write_recordings
 from ptwin.physics.elastic import ReferenceCurve, hertz_force
 from ptwin.physics.model import ForceModel, smooth_contact_radius
 from ptwin.physics.recurrence import relaxation_integral
 from ptwin.physics.samples import Samples
+from ptwin.pipeline.prepare import UnsupportedSet, prepare
 from ptwin.synth.simulator import Experiment, Hold, simulate, simulate_curve
+from tests.conftest import settings_for
 
 pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 
@@ -145,3 +147,28 @@ def test_a_slow_ramp_reaches_its_hold_depth_when_the_quasi_static_balance_says()
     quasi_static = (depth + force / e.spring_constant - e.z_start) / speed  # base at k(z − w) = Hertz(w)
     assert curve.time[-1] == pytest.approx(quasi_static, rel=0.01)
     assert curve.depth[-1] == pytest.approx(depth, rel=1e-3)
+
+
+def test_holds_at_the_references_depth_are_fitted_and_one_approach_alone_is_refused(tmp_path, coarse_cache):
+    # Two ramp-and-holds to the same depth: the tip creeps on in each hold (the force relaxes through the
+    # cantilever), beyond the reference's deepest approach sample. Both holds are fitted (the reference's
+    # own too: its approach is the law); with one approach and no hold the set is refused in one line.
+    holds = (Hold(2e-6, 0.3, 2e-6), Hold(2e-6, 0.3, 8e-6))
+    experiment = Experiment(base_speeds=(), holds=holds, spring_constant=0.5, samples=600, noise_std=1e-10)
+    write_recordings(tmp_path / "holds", *simulate(experiment))
+    prepared = prepare(
+        settings_for(f"data.path={tmp_path / 'holds'}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda s: None
+    )
+    samples, law = prepared.samples, prepared.make_model.reference
+    assert samples.curve_ids == ("v2h", "v8h2")
+    for curve in range(2):
+        hold = (samples.curve == curve) & (samples.segment == HOLD)
+        assert (samples.depth[hold] > law.deepest).all()  # the whole hold lies beyond the law read off v2h ...
+        assert samples.in_contact[hold].all()  # ... and is fitted
+    assert not samples.in_contact[(samples.curve == 0) & (samples.segment == APPROACH)].any()
+
+    write_recordings(tmp_path / "one", *simulate(Experiment(base_speeds=(5e-6,), samples=300)))
+    with pytest.raises(UnsupportedSet, match="every curve is at 5 µm/s; .* or hold the base still"):
+        prepare(
+            settings_for(f"data.path={tmp_path / 'one'}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda s: None
+        )

@@ -12,6 +12,7 @@ import numpy as np
 
 from ptwin.data.contact import levels_with_speed
 from ptwin.data.kinematics import CurveKinematics
+from ptwin.data.recordings import APPROACH
 
 SPOT_VARIATION = 0.05  # replicates differing by more than this are reported
 DEPTH_POINTS = 50
@@ -205,7 +206,7 @@ def rate_effect(curves: list[CurveKinematics], reference: CurveKinematics) -> Ra
 
 
 def _approach(curve: CurveKinematics) -> tuple[np.ndarray, np.ndarray]:
-    use = curve.in_contact & (curve.segment == 0)
+    use = curve.in_contact & (curve.segment == APPROACH)
     return curve.depth[use], curve.force[use]
 
 

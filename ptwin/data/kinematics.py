@@ -35,7 +35,7 @@ import pandas as pd
 
 from ptwin.data.contact import Baseline, NoBaseline, estimate_baseline, levels_with_speed
 from ptwin.data.noise import NoiseModel, curve_noise, with_std
-from ptwin.data.recordings import SEGMENTS, RecordingError, RecordingSet
+from ptwin.data.recordings import APPROACH, RETRACT, SEGMENTS, RecordingError, RecordingSet
 
 PINNING_TRAVEL = 0.25  # the last fraction of an approach's free travel, fitted with an estimated contact
 
@@ -54,7 +54,7 @@ class CurveKinematics:
     velocity: np.ndarray  # U [m/s]
     height: np.ndarray  # H [m]
     in_contact: np.ndarray  # bool: samples in contact, fitted (z ≥ 0 and w > 0, not on a retract)
-    segment: np.ndarray  # int: index into SEGMENTS (0 approach, 1 hold, 2 retract)
+    segment: np.ndarray  # int: index into SEGMENTS (APPROACH, HOLD, CREEP, RETRACT)
     base_speeds: np.ndarray  # each sample's base speed [m/s] (0 in a hold)
     noise: NoiseModel
     baseline_offset: float | None  # pre-contact force [N]: its mean (known contact), the removed line's at
@@ -133,7 +133,7 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
     for curve_id, curve in rows.items():
         time, z, force = (curve[c].to_numpy(dtype=np.float64) for c in ("time", "z", "force"))
         segment = _segment_codes(curve)
-        approach = segment == 0
+        approach = segment == APPROACH
         baseline = baselines.get(curve_id)
         if baseline is not None:
             z, force = baseline.remove(z, force)
@@ -157,7 +157,7 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
                 contact_radius=contact_radius(depth, meta.probe_radius),
                 velocity=segmented_derivative(time, depth, window, segment),
                 height=meta.sample_thickness - depth,
-                in_contact=(z >= 0) & (depth > 0) & (segment < SEGMENTS.index("retract")),
+                in_contact=(z >= 0) & (depth > 0) & (segment != RETRACT),
                 segment=segment,
                 base_speeds=speeds,
                 noise=noise,
@@ -180,7 +180,7 @@ def _estimated_baselines(recordings: RecordingSet, rows: dict[str, pd.DataFrame]
     (``levels_with_speed``), only the common level is removed, so the drag stays in the force."""
     baselines, speeds = {}, []
     for curve_id, curve in rows.items():
-        approach = _segment_codes(curve) == 0
+        approach = _segment_codes(curve) == APPROACH
         z, force = (curve[c].to_numpy(dtype=np.float64)[approach] for c in ("z", "force"))
         baselines[curve_id] = _estimated_baseline(recordings, curve_id, z, force)
         speeds.append(float(curve["base_speed"].to_numpy()[approach][0]))

@@ -17,9 +17,20 @@ import yaml
 
 FORMAT = "ptwin-recordings/1"
 COLUMNS = ("curve", "base_speed", "time", "z", "force")
-SEGMENTS = ("approach", "hold", "retract")  # the optional column's values, in the order a curve has them
-SPEED_SIGN = {"approach": lambda v: v > 0, "hold": lambda v: v == 0, "retract": lambda v: v < 0}
-SPEED_RULE = {"approach": "> 0 (into the sample)", "hold": "0 (the base is fixed)", "retract": "< 0 (out of it)"}
+SEGMENTS = ("approach", "hold", "creep", "retract")  # the optional column's values, in the order a curve has them
+APPROACH, HOLD, CREEP, RETRACT = range(len(SEGMENTS))  # their codes (``CurveKinematics.segment``)
+SPEED_SIGN = {
+    "approach": lambda v: v > 0,
+    "hold": lambda v: v == 0,
+    "creep": lambda v: v == 0,
+    "retract": lambda v: v < 0,
+}
+SPEED_RULE = {
+    "approach": "> 0 (into the sample)",
+    "hold": "0 (the base is fixed)",
+    "creep": "0 (the feedback moves the base: z as recorded)",
+    "retract": "< 0 (out of it)",
+}
 MIN_SAMPLES = 20
 # Magnitudes no AFM indentation reaches in SI: a value past them is in other units.
 _PLAUSIBLE = {"z": (1e-3, "m (micrometres?)"), "force": (1e-3, "N (nanonewtons?)"), "base_speed": (1e-2, "m/s (µm/s?)")}
@@ -170,7 +181,8 @@ def _read_curves(file: Path, meta: Meta) -> pd.DataFrame:
         if bad.any():
             row = int(np.argmax(bad.to_numpy()))
             raise RecordingError(
-                f"{file}: row {row + 2}, column segment: {frame['segment'].iloc[row]!r}; use approach, hold or retract"
+                f"{file}: row {row + 2}, column segment: {frame['segment'].iloc[row]!r}; use "
+                f"{', '.join(SEGMENTS[:-1])} or {SEGMENTS[-1]}"
             )
     for column in COLUMNS[1:]:
         values = pd.to_numeric(frame[column].str.strip(), errors="coerce")
@@ -242,8 +254,8 @@ def _check_curve(file: Path, rows: pd.DataFrame, start: int, meta: Meta) -> None
 
 
 def _check_segments(file: Path, rows: pd.DataFrame, start: int) -> None:
-    """Segments in time order (approach, hold, retract), each contiguous, at one base speed: > 0 on the
-    approach, 0 in a hold, < 0 on the retract."""
+    """Segments in time order (approach, hold, creep, retract), each contiguous, at one base speed: > 0 on the
+    approach, 0 in a hold or a creep, < 0 on the retract."""
     curve = rows["curve"].iloc[0]
     names = rows["segment"].to_numpy() if "segment" in rows else np.full(len(rows), SEGMENTS[0])
     order = np.array([SEGMENTS.index(name) for name in names])
@@ -251,7 +263,7 @@ def _check_segments(file: Path, rows: pd.DataFrame, start: int) -> None:
         row = start + int(np.argmax(np.diff(order) < 0)) + 1
         raise RecordingError(
             f"{file}: row {row + 2}, curve {curve!r}: segment {names[row - start]!r} comes after "
-            f"{names[row - start - 1]!r}; a curve's segments run approach, hold, retract"
+            f"{names[row - start - 1]!r}; a curve's segments run approach, hold, creep, retract"
         )
     speeds = rows["base_speed"].to_numpy()
     for code, name in enumerate(SEGMENTS):

@@ -107,8 +107,8 @@ def structure_test(
     inherited = 0.0
     if reference is not None:
         nodes = reference.smooth(_draw(rng, reference.samples, noise)) * reference.noise_std  # (nodes, R)
-        at, t = (v.detach().cpu().numpy() for v in reference.bracket(samples.depth[index].detach().cpu()))
-        inherited = nodes[at] * (1.0 - t[:, None]) + nodes[at + 1] * t[:, None]  # (samples, R) [N]
+        nodes = torch.from_numpy(nodes).to(reference.depth_nodes.device)
+        inherited = reference.interpolate(nodes, samples.depth[index].detach()).cpu().numpy()  # (samples, R) [N]
     sigma = samples.noise_floor[index].detach().cpu().numpy()[:, None]
     residual = (sigma * _draw(rng, index.numel(), noise) - inherited) / sigma
     curve = samples.curve[index].detach().cpu().numpy()

@@ -18,6 +18,7 @@ import numpy as np
 import torch
 from torch.func import jvp
 
+from ptwin.data.recordings import APPROACH
 from ptwin.physics.model import ForceModel, total
 from ptwin.physics.samples import Samples
 
@@ -60,7 +61,7 @@ def apparent_permeability(
 
     plateau = {}
     for i, curve in enumerate(samples.curve_ids):
-        mine = (samples.curve == i) & samples.in_contact & (samples.segment == 0)  # the approach
+        mine = (samples.curve == i) & samples.in_contact & (samples.segment == APPROACH)  # the approach
         deep = mine & (samples.depth >= plateau_from * samples.depth[mine].max()) if mine.any() else mine
         values = permeability[deep]
         values = values[~values.isnan()]

@@ -11,6 +11,7 @@ import torch
 from torch import nn
 
 from ptwin.data.kinematics import CurveKinematics, window_line
+from ptwin.data.recordings import APPROACH
 from ptwin.physics.samples import Samples
 
 
@@ -34,12 +35,21 @@ class ReferenceCurve(nn.Module):
     isotonic (the solid law is monotone). The nodes also carry the curve's time and
     velocity (``node_samples``), so that a force model can evaluate its own
     rate-dependent forces there (``ForceModel.elastic_nodes``). Between nodes: linear
-    interpolation (monotone nodes stay monotone); beyond the deepest node: the last segment.
+    interpolation (monotone nodes stay monotone). Beyond the deepest node the law is continued as a
+    sphere's: a line in w^1.5 through the deepest ``TAIL`` of the nodes (exact for Hertz; first-order
+    exact for any law), up to ``CONTINUED`` of the reference's depth further. That is where a hold's tip
+    creeps on as the force relaxes through the cantilever (the force falls, so w = z − F/k_s grows): on
+    a curve held at the reference's own depth every hold sample lies beyond its deepest approach sample;
+    and where a creep at constant force sinks in. (Approach samples deeper than the reference are not
+    fitted: a deeper approach would need a deeper reference.)
     """
+
+    TAIL = 0.1  # fraction of the nodes (the deepest) the continuation's slope is read off
+    CONTINUED = 0.25  # how far beyond the reference's depth (fraction of it) the continued law is used
 
     def __init__(self, reference: CurveKinematics, nodes: int = 200, smoothing: float = 0.05):
         super().__init__()
-        use = reference.in_contact & (reference.segment == 0)  # the approach: F(w) there is a function
+        use = reference.in_contact & (reference.segment == APPROACH)  # the approach: F(w) there is a function
         order = np.argsort(reference.depth[use])
         depth, force = reference.depth[use][order], reference.force[use][order]
         grid = np.linspace(0.0, depth[-1], nodes)
@@ -60,6 +70,18 @@ class ReferenceCurve(nn.Module):
         self.curve = reference.curve
         self.noise_std = reference.noise.std  # [N]: what the law inherits of the reference's noise
         self.samples = depth.size  # the reference's samples the law is read off
+        tail = grid[-max(2, int(self.TAIL * nodes)) :] ** 1.5
+        self.register_buffer("tail_slope", as_tensor((tail - tail.mean()) / np.sum((tail - tail.mean()) ** 2)))
+
+    @property
+    def deepest(self) -> float:
+        """The reference's deepest depth [m]: where the law read off it ends."""
+        return float(self.depth_nodes[-1])
+
+    @property
+    def known_depth(self) -> float:
+        """The deepest depth [m] the law is used at in a hold or a creep (continued beyond ``deepest``)."""
+        return (1.0 + self.CONTINUED) * self.deepest
 
     def smooth(self, values: np.ndarray) -> np.ndarray:
         """Values on the reference's samples (in depth order; (samples, …)) smoothed onto the depth nodes as the
@@ -93,6 +115,11 @@ class ReferenceCurve(nn.Module):
         return index, position - index
 
     def interpolate(self, node_values: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
-        """Linear interpolation of values at the depth nodes to ``depth`` [m]."""
+        """Values at the depth nodes ((nodes,) or (nodes, …)) at ``depth`` [m]: linear between nodes, beyond
+        the deepest continued as a line in w^1.5 (the class docstring). Linear in ``node_values``."""
         index, t = self.bracket(depth)
-        return torch.lerp(node_values[index], node_values[index + 1], t)
+        trailing = (...,) + (None,) * (node_values.dim() - 1)
+        between = torch.lerp(node_values[index], node_values[index + 1], t[trailing])
+        slope = torch.tensordot(self.tail_slope, node_values[-self.tail_slope.numel() :], dims=1)
+        continued = node_values[-1] + slope * (depth.clamp(min=0.0) ** 1.5 - self.deepest**1.5)[trailing]
+        return torch.where((depth > self.deepest)[trailing], continued, between)

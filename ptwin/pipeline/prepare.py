@@ -12,7 +12,7 @@ import torch
 from ptwin.data.evidence import SPOT_VARIATION, RateEffect, drag_from_baselines, rate_effect, spot_variation
 from ptwin.data.kinematics import CurveKinematics, curve_kinematics
 from ptwin.data.noise import NoiseModel, pooled
-from ptwin.data.recordings import Meta, RecordingError, RecordingSet, load_recordings
+from ptwin.data.recordings import APPROACH, Meta, RecordingError, RecordingSet, load_recordings
 from ptwin.fitting.hybrid import ErrorNetwork, HybridTwin
 from ptwin.fitting.split import Split, split_samples
 from ptwin.pgd.basis import Basis
@@ -104,7 +104,8 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     curves = curve_kinematics(recordings, settings.data.smoothing, settings.diagnosis.block)
     _print_kinematics(curves, progress)
     reference = next(c for c in curves if c.curve == meta.reference_curve)
-    fitted, notes = _fitted_curves(recordings, curves, reference)
+    law = ReferenceCurve(reference, settings.model.elastic_nodes, settings.model.elastic_smoothing)
+    fitted, notes = _fitted_curves(recordings, curves, reference, law)
     noise = pooled(
         [c.noise for c in curves],
         [max(int(c.in_contact.sum()), 1) for c in curves],
@@ -116,8 +117,10 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     basis = cached_basis(settings.pgd, settings.cache_dir, progress)
     s = settings.split
     split = split_samples(samples, tuple(s.fractions), s.mode, s.held_out_curve, settings.seed)
-    law = ReferenceCurve(reference, settings.model.elastic_nodes, settings.model.elastic_smoothing)
-    contact_ids = samples.curve_ids if meta.contact_point == "estimate" else None
+    # The reference's contact is the origin of depth: a fitted hold of its own gets no correction.
+    contact_ids = None
+    if meta.contact_point == "estimate":
+        contact_ids = tuple(c for c in samples.curve_ids if c != reference.curve)
     factory = ModelFactory(
         meta, law, basis, settings.model, settings.permeability, settings.device, settings.seed, contact_ids
     )
@@ -127,27 +130,44 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     return Prepared(recordings, curves, basis, samples, split, factory, noise, notes, rate)
 
 
-def _fitted_curves(recordings: RecordingSet, curves, reference) -> tuple[list[CurveKinematics], list[str]]:
-    """The curves every stage fits (all but the reference, with samples in contact no deeper than the
-    reference's: the elastic law is not known beyond), and notes on what was left out."""
+def _fitted_curves(recordings: RecordingSet, curves, reference, law: ReferenceCurve):
+    """The curves every stage fits, and notes on what was left out: every curve but the reference, and of
+    the reference what follows its approach (a hold, a creep: the approach is the elastic law), with samples
+    in contact no deeper than the law is known (``ReferenceCurve.known_depth``)."""
+    after_approach = [c for c in curves if (c.in_contact & (c.segment != APPROACH)).any()]
     speeds = sorted({c.base_speed for c in curves})
-    if len(speeds) < 2:
+    if len(speeds) < 2 and not after_approach:
         raise UnsupportedSet(
             f"{recordings.path}: every curve is at {speeds[0] * 1e6:.3g} µm/s; one speed cannot separate the elastic "
-            f"law (read off the slowest curve) from K: record the same spot at two or more speeds, e.g. 3× apart"
+            f"law (read off the slowest curve) from K: record the same spot at two or more speeds, e.g. 3× apart, "
+            f"or hold the base still after the approach (stress relaxation)"
         )
-    deepest = reference.depth[reference.in_contact].max(initial=0.0)
     fitted, notes = [], []
     for curve in curves:
         if curve is reference:
-            continue
-        beyond = curve.in_contact & (curve.depth > deepest)
+            held = curve.in_contact & (curve.segment != APPROACH)
+            if not held.any():
+                continue
+            curve = replace(curve, in_contact=held, pins_contact=np.zeros_like(held))
+        # A hold or a creep lies beyond the reference's depth by what the tip creeps on (the law is continued
+        # there); an approach deeper than the reference would need a deeper reference.
+        known = np.where(curve.segment == APPROACH, law.deepest, law.known_depth)
+        beyond = curve.in_contact & (curve.depth > known)
         if beyond.any():
             notes.append(
-                f"{curve.curve}: {int(beyond.sum())} samples deeper than the reference curve ({deepest * 1e6:.2f} µm) "
-                f"are left out of the fits: the elastic law is not known there."
+                f"{curve.curve}: {int(beyond.sum())} samples deeper than the elastic law is known (the reference "
+                f"curve's {law.deepest * 1e6:.3g} µm on an approach, {100 * law.CONTINUED:.0f}% more in a hold or "
+                f"a creep) are left out of the fits."
             )
             curve = replace(curve, in_contact=curve.in_contact & ~beyond)
+        continued = curve.in_contact & (curve.depth > law.deepest)
+        if continued.any():
+            further = (curve.depth[continued].max() - law.deepest) * 1e9
+            notes.append(
+                f"{curve.curve}: {int(continued.sum())} samples after the approach lie up to {further:.3g} nm deeper "
+                f"than the reference curve reaches; the elastic law is continued there as a sphere's (a line in "
+                f"w^1.5 through its deepest {100 * law.TAIL:.0f}%)."
+            )
         if curve.in_contact.any():
             fitted.append(curve)
         else:

@@ -29,8 +29,9 @@ from ptwin.synth.maps import MapLayout, write_map
 from ptwin.synth.simulator import EFFECTS, Experiment, Hold, simulate
 
 
-def parse_holds(items: list[str]) -> tuple[Hold, ...]:
-    """``DEPTH:SECONDS`` (a ramp-and-hold at every speed) or ``DEPTH:SECONDS:SPEED`` (at one), SI units."""
+def parse_holds(items: list[str], speeds: list[float] | None = None) -> tuple[Hold, ...]:
+    """``DEPTH:SECONDS`` (a ramp-and-hold at every speed: each of ``speeds`` where given) or
+    ``DEPTH:SECONDS:SPEED`` (at one), SI units."""
     holds = []
     for item in items:
         try:
@@ -39,7 +40,10 @@ def parse_holds(items: list[str]) -> tuple[Hold, ...]:
             raise SystemExit(f"--hold {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED in SI units") from None
         if len(values) not in (2, 3) or values[0] <= 0 or values[1] < 0 or (len(values) == 3 and values[2] <= 0):
             raise SystemExit(f"--hold {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED, depth and speed > 0")
-        holds.append(Hold(*values))
+        if len(values) == 3 or speeds is None:
+            holds.append(Hold(*values))
+        else:
+            holds += [Hold(*values, speed) for speed in speeds]
     return tuple(holds)
 
 
@@ -94,6 +98,11 @@ def _parser(defaults: Experiment) -> argparse.ArgumentParser:
     parser.add_argument("--spring-constant", type=float, default=defaults.spring_constant, help="k_s [N/m]")
     parser.add_argument("--sample-thickness", type=float, default=defaults.sample_thickness, help="H0 [m]")
     parser.add_argument("--speeds", type=float, nargs="+", default=list(defaults.base_speeds), help="[m/s]")
+    parser.add_argument(
+        "--holds-only",
+        action="store_true",
+        help="record the ramp-and-holds alone (a --hold without SPEED at each of --speeds), no approach-only curves",
+    )
     parser.add_argument("--samples", type=int, default=defaults.samples, help="per curve")
     parser.add_argument("--z-start", type=float, default=defaults.z_start, help="first base displacement [m] (< 0)")
     parser.add_argument("--z-end", type=float, default=defaults.z_end, help="final base displacement [m]")
@@ -133,7 +142,7 @@ def main(argv: list[str] | None = None) -> None:
             sample_thickness=args.sample_thickness,
             permeability=args.permeability,
             effective_modulus=args.effective_modulus,
-            base_speeds=tuple(args.speeds),
+            base_speeds=() if args.holds_only else tuple(args.speeds),
             samples=args.samples,
             z_start=args.z_start,
             z_end=args.z_end,
@@ -146,7 +155,8 @@ def main(argv: list[str] | None = None) -> None:
             contact_error=args.contact_error,
             baseline_offset=args.baseline_offset,
             tilt=args.tilt,
-            holds=parse_holds(args.hold) + proposed_holds(args.next_experiment),
+            holds=parse_holds(args.hold, args.speeds if args.holds_only else None)
+            + proposed_holds(args.next_experiment),
             seed=args.seed,
             effects=parse_effects(args.effect),
         )

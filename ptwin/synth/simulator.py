@@ -99,8 +99,11 @@ class Experiment:
     tilt: float = 0.0  # baseline slope dF/dz [N/m] (virtual deflection), every curve
     sample_rate: float | None = None  # [Hz]: a curve has duration × rate samples (else ``samples``)
     holds: tuple[Hold, ...] = ()  # each: every base speed recorded again as a ramp-and-hold (ids v5h, v5h2, ...)
+    # No base speeds: the ramp-and-holds alone (each with its own speed), e.g. one stress relaxation per spot.
 
     def __post_init__(self):
+        if not self.base_speeds and (not self.holds or any(hold.speed is None for hold in self.holds)):
+            raise ValueError("base_speeds: none given, so every hold needs its own speed (DEPTH:SECONDS:SPEED)")
         for term, params in self.effects.items():
             if term not in EFFECTS:
                 raise ValueError(f"effects: unknown term {term!r}; known effects: {', '.join(EFFECTS)}")
@@ -316,7 +319,7 @@ def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
         for number, hold in enumerate(e.holds, start=1)
         for speed in ((hold.speed,) if hold.speed else e.base_speeds)
     ]
-    frames = []
+    frames, slowest = [], None
     for speed, replicate, hold, number in protocols:
         modulus = e.effective_modulus * (1.0 + e.stiffness_spread * artefacts.standard_normal())
         curve = simulate_curve(e, speed, modulus, hold, balance=False)  # a recording has no balance to check
@@ -329,12 +332,14 @@ def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
             columns["curve"] += "h" if number == 1 else f"h{number}"
             columns["segment"] = np.where(curve.segment == 1, "hold", "approach")
         frames.append(pd.DataFrame({**columns, "z": z, "force": curve.force + offset + noise}))
+        if slowest is None or speed < slowest[0]:
+            slowest = (speed, columns["curve"])
     meta = Meta(
         probe_radius=e.probe_radius,
         spring_constant=e.spring_constant,
         sample_thickness=e.sample_thickness,
         fluid_viscosity=e.fluid_viscosity,
-        reference_curve=curve_id(min(e.base_speeds)),
+        reference_curve=slowest[1],
         sample="synthetic (ptwin.synth)",
         contact_point=e.contact_point,
     )
