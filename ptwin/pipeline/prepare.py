@@ -13,6 +13,7 @@ from ptwin.data.evidence import SPOT_VARIATION, RateEffect, drag_from_baselines,
 from ptwin.data.kinematics import CurveKinematics, curve_kinematics
 from ptwin.data.noise import NoiseModel, pooled
 from ptwin.data.recordings import APPROACH, Meta, RecordingError, RecordingSet, load_recordings
+from ptwin.data.relaxation import Relaxation, relaxations
 from ptwin.fitting.hybrid import ErrorNetwork, HybridTwin
 from ptwin.fitting.split import Split, split_samples
 from ptwin.pgd.basis import Basis
@@ -81,6 +82,7 @@ class Prepared:
     noise: NoiseModel  # the set's
     notes: list[str] = field(default_factory=list)  # evidence about the data, in sentences
     rate: RateEffect | None = None  # F/F_ref at equal depth of the faster approaches
+    relaxations: list[Relaxation] = field(default_factory=list)  # what each hold and creep shows before any model
 
     @property
     def noise_floor(self) -> float:
@@ -125,9 +127,10 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
         meta, law, basis, settings.model, settings.permeability, settings.device, settings.seed, contact_ids
     )
     rate = rate_effect(curves, reference)
+    held = relaxations(curves)
     evidence = (_spot_note(curves), drag_from_baselines(curves), rate.sentence() if rate else None)
-    notes += [sentence for sentence in evidence if sentence]
-    return Prepared(recordings, curves, basis, samples, split, factory, noise, notes, rate)
+    notes += [sentence for sentence in evidence if sentence] + [r.sentence() for r in held]
+    return Prepared(recordings, curves, basis, samples, split, factory, noise, notes, rate, held)
 
 
 def _fitted_curves(recordings: RecordingSet, curves, reference, law: ReferenceCurve):

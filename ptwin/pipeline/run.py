@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -171,4 +171,5 @@ def _results(prepared: Prepared, identification: Identification, settings: Setti
         "stages": stages,
         "apparent_permeability": apparent_record(identification.apparent),
         "viscous_per_speed": per_curve_record(identification.viscous_per_curve, term),
+        "relaxations": [{**asdict(r), "change": r.change} for r in prepared.relaxations],
     }

@@ -12,10 +12,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from ptwin.data.recordings import CREEP, HOLD  # noqa: E402
 from ptwin.fitting.split import Split  # noqa: E402
 from ptwin.physics.terms import VOCABULARY  # noqa: E402
 
 NANO, MICRO = 1e9, 1e6
+MAX_PANELS = 6  # of the holds-and-creeps figure
 
 
 def _curves(samples, index):
@@ -92,7 +94,7 @@ def save_figures(
     }
     if rate is not None:
         builders["rate_effect"] = lambda: _rate_effect(rate)
-    if bool((samples.segment == 1).any()):
+    if bool((samples.in_contact & ((samples.segment == HOLD) | (samples.segment == CREEP))).any()):
         series = {"base": base_force, **({"corrected": corrected} if corrected is not None else {})}
         builders["holds_force_time"] = lambda: _holds(samples, series)
     if diagnosis is not None:
@@ -131,22 +133,28 @@ def _rate_effect(rate):
 
 
 def _holds(samples, series: dict):
-    """Force against time of every curve with a hold: measured, and each model (the hold shaded)."""
-    curves = [i for i in range(len(samples.curve_ids)) if bool(((samples.curve == i) & (samples.segment == 1)).any())]
-    figure, axes = plt.subplots(1, len(curves), figsize=(4.5 * len(curves), 3.8), squeeze=False)
-    for ax, i in zip(axes[0], curves):
-        mine = torch.nonzero((samples.curve == i) & (samples.depth > 0)).squeeze(1)
+    """Force against time since each hold (or creep) began, on a log axis where relaxation is read: measured,
+    and each model; one panel a segment, at most ``MAX_PANELS``."""
+    panels = []
+    for i in range(len(samples.curve_ids)):
+        for code, kind in ((HOLD, "hold"), (CREEP, "creep at constant force")):
+            mine = torch.nonzero((samples.curve == i) & (samples.segment == code) & samples.in_contact).squeeze(1)
+            if mine.numel() > 1:
+                panels.append((samples.curve_ids[i], kind, mine))
+    panels = panels[:MAX_PANELS]
+    figure, axes = plt.subplots(1, len(panels), figsize=(4.5 * len(panels), 3.8), squeeze=False)
+    for ax, (curve, kind, mine) in zip(axes[0], panels):
         time = samples.time[mine].numpy()
-        ax.plot(time, samples.force[mine].numpy() * NANO, ".", ms=1.5, color="grey", alpha=0.5, label="measured")
+        since = time - time[0] + 0.5 * float(np.median(np.diff(time)))  # the first sample, half a step in
+        ax.plot(since, samples.force[mine].numpy() * NANO, ".", ms=1.5, color="grey", alpha=0.5, label="measured")
         for (label, values), style in zip(series.items(), ("-", "--")):
-            ax.plot(time, values[mine].numpy() * NANO, style, lw=1, label=label)
-        hold = time[(samples.segment[mine] == 1).numpy()]
-        ax.axvspan(hold.min(), hold.max(), color="tab:blue", alpha=0.08, label="hold")
-        ax.set_xlabel("time [s]")
-        ax.set_title(samples.curve_ids[i])
+            ax.plot(since, values[mine].numpy() * NANO, style, lw=1.2, label=label)
+        ax.set_xscale("log")
+        ax.set_xlabel(f"time since the {kind.split()[0]} began [s]")
+        ax.set_title(f"{curve}: {kind}", fontsize=9)
     axes[0][0].set_ylabel("force [nN]")
     axes[0][0].legend(fontsize=7)
-    figure.suptitle("Ramp-and-hold curves against time")
+    figure.suptitle("Holds and creeps against time (log axis)")
     figure.tight_layout()
     return figure
 
