@@ -38,6 +38,80 @@ def test_vendor_file_becomes_a_valid_recording_set(tmp_path, name, extra, speed)
     assert z[0] < 0 < z[-1]  # the estimated contact lies inside the approach
 
 
+def test_the_creep_compliance_file_reads_its_creep_at_constant_force(tmp_path, capsys):
+    main([str(AFM / "fmt-jpk-cc_pr14-polymergel-2021.06.30.jpk-force"), "--out", str(tmp_path / "set"), *COMMON])
+    assert "as v10c (the retract (3000 samples) not written)" in capsys.readouterr().out
+    recordings = load_recordings(tmp_path / "set")
+    creep = recordings.curve("v10c")
+    assert list(dict.fromkeys(creep["segment"])) == ["approach", "creep"]
+    held = creep[creep["segment"] == "creep"]
+    assert len(held) == 3000 and (held["base_speed"] == 0).all()
+    assert held["time"].iloc[-1] - held["time"].iloc[0] == pytest.approx(3.0, abs=0.01)
+    force = held["force"].to_numpy()
+    assert force[100:].std() < 0.02 * force.mean()  # the feedback holds the force ...
+    depth = held["z"].to_numpy() - force / recordings.meta.spring_constant
+    assert depth[-100:].mean() - depth[:100].mean() > 0.1e-6  # ... while the tip sinks in
+
+
+def test_the_base_travel_is_the_sensor_measured_height():
+    # JPK's strain gauge ("height (measured)") travels speed × duration on the approach; the piezo's
+    # "height" travels 54% of it on this file. Depths w = z − F/k_s must come from the sensor.
+    import afmformats
+
+    from ptwin.data.import_afm import curve_rows
+
+    data = afmformats.load_data(AFM / "fmt-jpk-fd_spot3-0192.jpk-force")[0]
+    rows, speed, _, _ = curve_rows(data, "spot3", None)
+    duration = rows["time"].iloc[-1] - rows["time"].iloc[0]
+    assert np.ptp(rows["z"]) == pytest.approx(speed * duration, rel=0.01)
+
+
+class StressRelaxation:
+    """What afmformats gives for a JPK stress-relaxation file (modality, four segments: a pause at constant
+    height, the approach, the hold, the retract), here around a simulated ramp-and-hold, heights falling as
+    the base moves in (JPK's sign)."""
+
+    def __init__(self):
+        from ptwin.synth.simulator import Experiment, Hold, simulate_curve
+
+        e = Experiment(
+            spring_constant=0.5, z_start=-2e-6, sample_rate=2000.0, effects={"solid_relaxation": {"g": 0.3, "tau": 0.2}}
+        )
+        curve = simulate_curve(e, 10e-6, hold=Hold(2e-6, 1.0))
+        noise = np.random.default_rng(0).normal(0.0, 3e-11, curve.time.size + 400)
+        retract = np.linspace(curve.z[-1], curve.z[0], 200)
+        z = np.r_[np.full(200, curve.z[0]), curve.z, retract]
+        self.data = {
+            "segment": np.r_[np.zeros(200), curve.segment + 1, np.full(200, 3)].astype(np.uint8),
+            "time": np.r_[np.arange(200) / 2000.0, 0.1 + curve.time, 0.1 + curve.time[-1] + np.arange(1, 201) / 2000],
+            "height (measured)": 50e-6 - z,
+            "force": np.r_[np.zeros(200), curve.force, np.zeros(200)] + noise + 1e-9,
+        }
+        self.columns = list(self.data)
+        self.metadata = {"imaging mode": "stress-relaxation", "speed approach": 10e-6, "spring constant": 0.5}
+
+    def __getitem__(self, column):
+        return self.data[column]
+
+
+def test_a_stress_relaxation_is_read_whole_and_its_pause_is_not_the_approach(tmp_path, monkeypatch, capsys):
+    import afmformats
+
+    monkeypatch.setattr(afmformats, "load_data", lambda path, meta_override=None: [StressRelaxation()])
+    main(["cell.jpk-force", "--out", str(tmp_path / "set"), *COMMON])
+    assert "cell.jpk-force as v10h (the pause (200 samples) and the retract (200 samples) not written)" in (
+        capsys.readouterr().out
+    )
+    recordings = load_recordings(tmp_path / "set")
+    curve = recordings.curve("v10h")
+    assert list(dict.fromkeys(curve["segment"])) == ["approach", "hold"]
+    approach, hold = (curve[curve["segment"] == kind] for kind in ("approach", "hold"))
+    assert (approach["base_speed"] == 10e-6).all() and (hold["base_speed"] == 0).all()
+    assert approach["time"].iloc[0] == 0.0 and approach["z"].iloc[0] == pytest.approx(-2e-6, abs=0.1e-6)
+    assert hold["time"].iloc[-1] - hold["time"].iloc[0] == pytest.approx(1.0, abs=1e-3)
+    assert np.ptp(hold["z"]) < 1e-12  # the base stays where the approach left it
+
+
 def test_a_file_lacking_its_calibration_says_which_options_to_pass(tmp_path, capsys):
     # afmformats raises MissingMetaDataError (a BaseException) and logs its traceback: one line, exit 2.
     name = "fmt-ntmdt-txt-fd_2015_01_17_gel4-0,1_mQ_adh_6B_Curve_DFL_Height_51.txt"

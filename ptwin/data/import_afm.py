@@ -1,19 +1,25 @@
 """python -m ptwin.data.import_afm FILES... --out DIR --probe-radius R --viscosity MU --thickness H0 [--map]
 
-Vendor force-distance files (JPK .jpk-force, Asylum .ibw, NT-MDT text and whatever
-afmformats reads) into one recording set, one curve per file. With ``--map``, force-map
-files (e.g. JPK .jpk-force-map, one per speed) into a force map: a recording set per spot,
-spots matched across the files by their grid index, each with its position. What no file knows
-(probe radius, fluid viscosity, sample thickness, and for some formats the spring
-constant, sensitivity or speed) comes from the command line. Only the approach is
-kept: segment 0, cut at the deepest base position (some files, e.g. Asylum .ibw,
-store approach and retract as one segment). The force is kept raw (its baseline
-offset is evidence).
+Vendor AFM files (JPK .jpk-force, Asylum .ibw, NT-MDT text and whatever afmformats
+reads) into one recording set, one curve per file: force-distance, stress-relaxation and
+creep-compliance curves alike, sets mixing them too. With ``--map``, force-map files (e.g.
+JPK .jpk-force-map, one per speed or protocol) into a force map: a recording set per spot,
+spots matched across the files by their grid index, each with its position. What no file
+knows (probe radius, fluid viscosity, sample thickness, and for some formats the spring
+constant, sensitivity or speed) comes from the command line.
 
-z is the base travel from the contact estimated by ``ptwin.data.contact`` (z < 0
-before it); meta.yaml says ``contact_point: estimate``, so every run estimates each
-curve's contact and baseline again and refines it in the fit. Time: the file's own,
-else uniform over travel / approach speed.
+Each segment is kept for what the file's imaging mode says it is (recording format v1.2):
+the approach (cut at the deepest base position: some files, e.g. Asylum .ibw, store
+approach and retract as one segment), a hold at constant height (stress relaxation), a creep
+at constant force (creep compliance; z as the sensor recorded it, base speed 0). A stress
+relaxation's leading pause and every retract are not written (meta.yaml's notes and the
+command's output say so). The force is kept raw (its baseline offset is evidence).
+
+z is the base travel from the contact estimated by ``ptwin.data.contact`` on the approach
+(z < 0 before it), read off the sensor-measured height where the file has one; meta.yaml
+says ``contact_point: estimate``, so every run estimates each curve's contact and baseline
+again and refines it in the fit. Time: the file's own (from the approach's start), else
+uniform over travel / approach speed (an approach alone).
 """
 
 from __future__ import annotations
@@ -29,6 +35,20 @@ import pandas as pd
 
 from ptwin.data.contact import NoBaseline, estimate_baseline
 from ptwin.data.recordings import Meta, RecordingError, load_recordings, write_recordings
+
+# What each segment of a curve is, by the imaging mode afmformats reads from the file (its segment order):
+# a stress relaxation's leading pause at constant height is baseline, not the approach.
+SEGMENTS_OF = {
+    "force-distance": ("approach", "retract"),
+    "creep-compliance": ("approach", "creep", "retract"),
+    "stress-relaxation": ("pause", "approach", "hold", "retract"),
+}
+KEPT = ("approach", "hold", "creep")  # written; the pause and the retract are said to be left out
+SUFFIX = {"hold": "h", "creep": "c"}  # of a curve's id, for what follows its approach
+# The sensor-measured base position where the file has one (JPK's strain gauge: its travel is the approach
+# speed × duration, the piezo's "height" 54–65% of it on every JPK file in ../shared/data/afm); nanite and
+# JPK's own "Vertical Tip Position" use it too.
+HEIGHT = "height (measured)"
 
 
 def load_datasets(path: Path, overrides: dict) -> list:
@@ -47,45 +67,66 @@ def load_datasets(path: Path, overrides: dict) -> list:
         quiet.setLevel(level)
 
 
-def approach_curve(path: Path, speed: float | None, overrides: dict) -> tuple[pd.DataFrame, float, float]:
-    """(curve rows without the id, base speed [m/s], spring constant [N/m]) of one curve file."""
-    return approach_rows(load_datasets(path, overrides)[0], str(path), speed)
+def curve_file(path: Path, speed: float | None, overrides: dict) -> tuple[pd.DataFrame, float, float, str]:
+    """``curve_rows`` of the curve in file ``path``."""
+    return curve_rows(load_datasets(path, overrides)[0], str(path), speed)
 
 
-def approach_rows(data, label: str, speed: float | None) -> tuple[pd.DataFrame, float, float]:
-    """(curve rows without the id, base speed [m/s], spring constant [N/m]) of one afmformats dataset;
-    ``label`` names it in errors."""
-    approach = np.asarray(data["segment"]) == 0
-    height_column = "height (piezo)" if "height (piezo)" in data.columns else "height (measured)"
-    height = np.asarray(data[height_column], dtype=np.float64)[approach]
-    force = np.asarray(data["force"], dtype=np.float64)[approach]
+def curve_rows(data, label: str, speed: float | None) -> tuple[pd.DataFrame, float, float, str]:
+    """(curve rows without the id, with their ``segment``, base speed [m/s], spring constant [N/m], what was
+    left out, in words) of one afmformats dataset; ``label`` names it in errors. Each segment is what the
+    dataset's imaging mode says it is (``SEGMENTS_OF``)."""
     md = data.metadata  # afmformats' metadata raises on .get of a key it lacks
+    mode = md["imaging mode"] if "imaging mode" in md else "force-distance"
+    if mode not in SEGMENTS_OF:
+        raise RecordingError(f"{label}: a {mode!r} recording; ptwin imports {', '.join(SEGMENTS_OF)} curves")
+    kinds = SEGMENTS_OF[mode]
+    codes = np.asarray(data["segment"]).astype(int)
+    if codes.max() >= len(kinds):
+        raise RecordingError(f"{label}: {codes.max() + 1} segments, a {mode} curve has {len(kinds)}; check the file")
+    kind = np.array(kinds)[codes]
     base_speed = speed or (md["speed approach"] if "speed approach" in md else None)
     if not base_speed:
         raise RecordingError(f"{label}: the file gives no approach speed; pass --speed in m/s")
     spring_constant = float(md["spring constant"])
-    travel = np.abs(height - height[0])  # the base moves into the sample
-    deepest = int(np.argmax(travel)) + 1
-    travel, force = travel[:deepest], force[:deepest]
+    height = np.asarray(data[HEIGHT if HEIGHT in data.columns else "height (piezo)"], dtype=np.float64)
+    force = np.asarray(data["force"], dtype=np.float64)
+    approach = np.flatnonzero(kind == "approach")
+    travel = (height - height[approach[0]]) * np.sign(height[approach[-1]] - height[approach[0]])
+    # Some files (Asylum .ibw) store approach and retract as one segment: the approach ends at its deepest.
+    retracting = approach[int(np.argmax(travel[approach])) + 1 :]
+    kind[retracting] = "retract"
+    approach = np.flatnonzero(kind == "approach")
     try:
-        contact_z = estimate_baseline(travel, force, spring_constant).contact_z
+        contact_z = estimate_baseline(travel[approach], force[approach], spring_constant).contact_z
     except NoBaseline as error:
         raise RecordingError(
             f"{label}: no baseline before contact ({error}); record the approach from further away"
         ) from None
+    kept = np.flatnonzero(np.isin(kind, KEPT) & (np.arange(kind.size) >= approach[0]))
     if "time" in data.columns:
-        time = np.asarray(data["time"], dtype=np.float64)[approach][:deepest]
-        time = time - time[0]
+        time = np.asarray(data["time"], dtype=np.float64)
+    elif np.any(kind[kept] != "approach"):
+        raise RecordingError(f"{label}: a {mode} curve without its time column; export it with time")
     else:
-        time = np.linspace(0.0, travel.max() / base_speed, len(travel))
-    rows = pd.DataFrame({"base_speed": float(base_speed), "time": time, "z": travel - contact_z, "force": force})
-    return rows, float(base_speed), spring_constant
+        time = np.interp(np.arange(kind.size), approach[[0, -1]], [0.0, np.ptp(travel[approach]) / base_speed])
+    rows = pd.DataFrame(
+        {
+            "base_speed": np.where(kind[kept] == "approach", float(base_speed), 0.0),
+            "time": time[kept] - time[approach[0]],
+            "z": travel[kept] - contact_z,
+            "force": force[kept],
+            "segment": kind[kept],
+        }
+    )
+    left = [f"the {name} ({int(np.sum(kind == name))} samples)" for name in dict.fromkeys(kind) if name not in KEPT]
+    return rows, float(base_speed), spring_constant, " and ".join(left)
 
 
-def import_files(files: list[Path], out: Path, meta: dict, speed: float | None, overrides: dict) -> None:
-    """One recording set in ``out``, a curve per file."""
-    curves = {path.name: approach_curve(path, speed, overrides) for path in files}
-    write_set(out, curves, meta)
+def import_files(files: list[Path], out: Path, meta: dict, speed: float | None, overrides: dict) -> str:
+    """One recording set in ``out``, a curve per file; which file became which curve, in words."""
+    curves = {path.name: curve_file(path, speed, overrides) for path in files}
+    return write_set(out, curves, meta)
 
 
 def import_maps(files: list[Path], out: Path, meta: dict, speed: float | None, overrides: dict) -> list[str]:
@@ -105,7 +146,7 @@ def import_maps(files: list[Path], out: Path, meta: dict, speed: float | None, o
             key = (int(md["grid index x"]), int(md["grid index y"]))
             label = f"{path} (spot {key[0]}, {key[1]})"
             try:
-                spots.setdefault(key, {})[label] = approach_rows(data, label, speed)
+                spots.setdefault(key, {})[label] = curve_rows(data, label, speed)
             except RecordingError as error:
                 failures.append(str(error))
             has_position = "position x" in md and "position y" in md
@@ -118,16 +159,19 @@ def import_maps(files: list[Path], out: Path, meta: dict, speed: float | None, o
     return failures
 
 
-def write_set(out: Path, curves: dict[str, tuple], meta: dict, position: tuple[float, float] | None = None) -> None:
-    """Write the recording set of ``curves`` ({source: approach rows, base speed, spring constant}) to
-    ``out`` and check it reads back."""
-    frames, springs = [], {}
-    for source, (rows, base_speed, spring_constant) in curves.items():
-        curve = f"v{base_speed * 1e6:.3g}"
+def write_set(out: Path, curves: dict[str, tuple], meta: dict, position: tuple[float, float] | None = None) -> str:
+    """Write the recording set of ``curves`` ({source: ``curve_rows``}) to ``out``, check it reads back, and
+    say which file became which curve and what was not written. A curve is named by its speed and what
+    follows its approach: v20h (a hold), v10c (a creep)."""
+    frames, springs, notes = [], {}, []
+    for source, (rows, base_speed, spring_constant, left) in curves.items():
+        after = [SUFFIX[kind] for kind in dict.fromkeys(rows["segment"]) if kind in SUFFIX]
+        curve = f"v{base_speed * 1e6:.3g}" + "".join(after)
         while any(frame["curve"].iloc[0] == curve for frame in frames):
             curve += "b"
-        frames.append(rows.assign(curve=curve)[["curve", "base_speed", "time", "z", "force"]])
+        frames.append(rows.assign(curve=curve)[["curve", "base_speed", "time", "z", "force", "segment"]])
         springs[Path(source).name] = spring_constant
+        notes.append(f"{Path(source).name} as {curve}" + (f" ({left} not written)" if left else ""))
     if max(springs.values()) > 1.01 * min(springs.values()):
         listing = ", ".join(f"{name} {k:.4g} N/m" for name, k in springs.items())
         raise RecordingError(
@@ -140,13 +184,14 @@ def write_set(out: Path, curves: dict[str, tuple], meta: dict, position: tuple[f
             spring_constant=next(iter(springs.values())),
             reference_curve=slowest,
             contact_point="estimate",
-            notes="imported with ptwin.data.import_afm: " + ", ".join(Path(s).name for s in curves),
+            notes="imported with ptwin.data.import_afm: " + "; ".join(notes),
             position=position,
             **meta,
         ),
         pd.concat(frames, ignore_index=True),
     )
     load_recordings(out)  # what was written must be a valid set: say so now, not at the first fit
+    return "; ".join(notes)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -173,7 +218,7 @@ def main(argv: list[str] | None = None) -> None:
     }
     try:
         if not args.map:
-            import_files(args.files, args.out, meta, args.speed, overrides)
+            print(import_files(args.files, args.out, meta, args.speed, overrides))
         else:
             for failure in import_maps(args.files, args.out, meta, args.speed, overrides):
                 print(f"not imported: {failure}", file=sys.stderr)
