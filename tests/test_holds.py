@@ -8,7 +8,7 @@ import torch
 
 import ptwin
 from ptwin.data.kinematics import curve_kinematics, segmented_derivative
-from ptwin.data.recordings import APPROACH, HOLD, load_recordings, write_recordings
+from ptwin.data.recordings import APPROACH, CREEP, HOLD, load_recordings, write_recordings
 from ptwin.physics.elastic import ReferenceCurve, hertz_force
 from ptwin.physics.model import ForceModel, smooth_contact_radius
 from ptwin.physics.recurrence import relaxation_integral
@@ -117,6 +117,43 @@ def test_the_force_model_reproduces_a_simulated_hold(term, values, tmp_path, coa
         error = (model((term,), {term: values})(samples) - samples.force)[hold].square().mean().sqrt()
         effect = (model((), {})(samples) - samples.force)[hold].square().mean().sqrt()
     assert effect > 3e-11  # the hold shows the term ...
+    assert error < 0.1 * effect  # ... and the model with its true parameters accounts for it
+
+
+@pytest.mark.parametrize(
+    ("term", "values"),
+    [
+        ("solid_relaxation", {"g": 0.2, "tau": 0.3}),
+        ("pore_pressure_relaxation", {"M": 2.0e4}),
+        ("power_law_rheology", {"alpha": 0.1}),
+    ],
+)
+def test_the_force_model_follows_a_creeps_depth_history(term, values, tmp_path, coarse_cache):
+    # A creep at constant force: the feedback moves the base as the tip sinks in. The model is driven by
+    # the recorded depth history, so with the true parameters it predicts the constant force; without the
+    # term it does not.
+    experiment = Experiment(
+        base_speeds=(2e-6,),
+        holds=(Hold(2e-6, 0.5, 8e-6, creep=True),),
+        spring_constant=0.3,
+        z_start=-0.5e-6,
+        sample_rate=2000.0,
+        noise_std=0.0,
+        effects={term: values},
+    )
+    write_recordings(tmp_path, *simulate(experiment))
+    reference, creep = curve_kinematics(load_recordings(tmp_path))
+    samples = Samples.from_curves([creep])
+    basis = next(coarse_cache.glob("*.pt"))
+    fluid = ptwin.FluidForce.load(basis, permeability=experiment.permeability, viscosity=1e-3)
+    model = ForceModel(ReferenceCurve(reference), fluid, 12e-6, 6e-3, (term,), {term: values})
+    base = ForceModel(ReferenceCurve(reference), fluid, 12e-6, 6e-3)
+    crept = samples.in_contact & (samples.segment == CREEP)
+    assert np.ptp(creep.depth[creep.segment == CREEP]) > 0.02e-6  # the tip sinks in ...
+    with torch.no_grad():
+        error = (model(samples) - samples.force)[crept].square().mean().sqrt()
+        effect = (base(samples) - samples.force)[crept].square().mean().sqrt()
+    assert effect > 1e-10  # ... the creep shows the term ...
     assert error < 0.1 * effect  # ... and the model with its true parameters accounts for it
 
 

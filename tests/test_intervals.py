@@ -6,7 +6,7 @@ import pytest
 import torch
 from torch import nn
 
-from ptwin.diagnosis.intervals import LEVEL, profile_interval
+from ptwin.diagnosis.intervals import LEVEL, profile_interval, within
 from ptwin.diagnosis.words import bounded
 from ptwin.fitting.lm import LevenbergMarquardt
 from ptwin.fitting.physics_fit import PhysicsFit, scaled_residual
@@ -103,3 +103,11 @@ def test_an_interval_open_on_one_side_is_said_as_the_bound_alone():
     assert bounded(6.5e-20, [None, 3.0e-15], ".2g", " m²") == "< 3e-15 m² (95%; the data set no lower limit)"
     assert bounded(1.0e-9, [2.0e-13, None], ".2g", " m²") == "> 2e-13 m² (95%; the data set no upper limit)"
     assert bounded(1.0, [None, None]) == "not fixed by these data"
+
+
+def test_a_bound_beyond_what_any_sample_has_is_no_bound():
+    plausible = (1e-24, 1e-9)
+    assert within([1e-17, 7e26], plausible) == [1e-17, None]
+    assert within([1e-30, 2e-16], plausible) == [None, 2e-16]
+    assert within([1e-17, 2e-16], plausible) == [1e-17, 2e-16]
+    assert within([None, 2e-16], plausible) == [None, 2e-16]

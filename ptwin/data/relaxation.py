@@ -1,8 +1,9 @@
 """What a hold or a creep shows before any model: how far the force relaxes at constant base
 position (a hold, stress relaxation) or the tip sinks at constant force (a creep), and how fast.
 
-The change is read from the segment's first sample to the mean of its last ``TAIL`` (noise
-averaged out there, not at the start, where a pore pressure drains in milliseconds), its
+The change is read from the approach's last sample (the peak force: the Darcy force drops
+when the base stops) to the mean of the segment's last ``TAIL`` (noise averaged out there,
+not at the start, where a pore pressure drains in milliseconds), its
 standard error from the segment's own scatter (second differences); the half time is where
 the change, smoothed over ``SMOOTHING`` samples, first reaches half of it: a relaxation spread
 over decades of time (a power law) reaches half late, a single exponential at 0.69 τ. Both
@@ -16,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ptwin.data.kinematics import CurveKinematics
-from ptwin.data.recordings import CREEP, HOLD
+from ptwin.data.recordings import APPROACH, CREEP, HOLD
 
 TAIL = 0.1  # fraction of the segment (its end) averaged for the relaxed value
 SMOOTHING = 5  # samples of the running mean the half time is read on
@@ -30,10 +31,10 @@ class Relaxation:
     curve: str
     kind: str  # "hold" or "creep"
     duration: float  # [s]
-    start: float  # the force (hold) or depth (creep) at the segment's first sample
+    start: float  # the force (hold) or depth (creep) where the approach ended
     end: float  # its mean over the segment's last TAIL
     error: float  # standard error of end − start, same unit
-    half_time: float | None  # [s] from the segment's start to half the change (None: the change is noise)
+    half_time: float | None  # [s] from the segment's first sample to half the change (None: the change is noise)
 
     @property
     def change(self) -> float:
@@ -61,22 +62,28 @@ class Relaxation:
 
 
 def relaxations(curves: list[CurveKinematics]) -> list[Relaxation]:
-    """Every hold and creep of ``curves`` that is in contact, in file order."""
+    """Every hold and creep of ``curves`` that is in contact, in file order, read from the approach's last
+    sample (the peak force of a stress relaxation: the drop of the Darcy force when the base stops is part
+    of what relaxes) where the segment follows one, else from its own first sample."""
     found = []
     for curve in curves:
         for code, kind in ((HOLD, "hold"), (CREEP, "creep")):
             mine = np.flatnonzero((curve.segment == code) & (curve.depth > 0))
-            if mine.size >= 2 * SMOOTHING:
-                values = curve.force[mine] if kind == "hold" else curve.depth[mine]
-                found.append(_read(curve.curve, kind, curve.time[mine] - curve.time[mine[0]], values))
+            if mine.size < 2 * SMOOTHING:
+                continue
+            values = curve.force if kind == "hold" else curve.depth
+            before = mine[0] - 1
+            start = values[before] if before >= 0 and curve.segment[before] == APPROACH else values[mine[0]]
+            time = curve.time[mine] - curve.time[mine[0]]
+            found.append(_read(curve.curve, kind, time, float(start), values[mine]))
     return found
 
 
-def _read(curve: str, kind: str, time: np.ndarray, values: np.ndarray) -> Relaxation:
+def _read(curve: str, kind: str, time: np.ndarray, start: float, values: np.ndarray) -> Relaxation:
     # The segment's own scatter (second differences remove any smooth relaxation), in its own unit.
     noise = float(np.std(np.diff(values, 2)) / np.sqrt(6.0))
     tail = max(int(TAIL * values.size), 1)
-    start, end = float(values[0]), float(values[-tail:].mean())
+    end = float(values[-tail:].mean())
     error = noise * np.sqrt(1.0 + 1.0 / tail)
     smoothed = np.convolve(values, np.ones(SMOOTHING) / SMOOTHING, mode="valid")
     halfway = (smoothed - start) / (end - start) >= 0.5 if end != start else np.zeros(smoothed.size, bool)

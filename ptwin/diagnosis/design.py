@@ -38,7 +38,7 @@ import torch
 
 from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.noise import NoiseModel
-from ptwin.data.recordings import Meta, RecordingSet
+from ptwin.data.recordings import SEGMENTS, Meta, RecordingSet
 from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, cheapest, fit_physics
 from ptwin.physics.samples import Samples
@@ -55,6 +55,9 @@ REFIT_TOLERANCE = 1e-6  # ... until a step gains less than this (relative): χ²
 MAX_SAMPLES = 2000  # of a simulated curve in a refit (every k-th, its χ² scaled by k)
 SPEEDS = (1e-7, 1e-4)  # [m/s]: what an AFM piezo's approach covers
 MICRO = 1e6
+# Evaluations of the force balance a simulated curve may take (the bench sets' take at most ~45,000, about
+# 0.4 s): a candidate whose values make it stiffer than that (a soft cell's tiny K) offers no protocol.
+BUDGET = 200_000
 
 
 @dataclass(frozen=True)
@@ -132,7 +135,8 @@ class ExperimentDesign:
 
     def _screen(self, names, fits: list[PhysicsFit]) -> list[Prediction]:
         """The predictions for every protocol of the menu the simulator can follow for all candidates (a
-        candidate's values may make one stiff beyond its tolerances: that protocol is then not offered)."""
+        candidate's values may make one stiff beyond its tolerances or ``BUDGET``: that protocol is then not
+        offered)."""
         predictions = []
         for protocol in self._menu(fits):
             try:
@@ -213,7 +217,7 @@ class ExperimentDesign:
         if key not in self._simulated:
             e = replace(self._experiment(fit), base_speeds=(protocol.base_speed,), z_end=2 * protocol.to_depth + 1e-6)
             hold = Hold(protocol.to_depth, protocol.hold)
-            self._simulated[key] = simulate_curve(e, protocol.base_speed, hold=hold, balance=False)
+            self._simulated[key] = simulate_curve(e, protocol.base_speed, hold=hold, balance=False, budget=BUDGET)
         return self._simulated[key]
 
     def _predict(self, names, fits: list[PhysicsFit], protocol: Protocol) -> Prediction:
@@ -272,7 +276,7 @@ class ExperimentDesign:
                 "time": curve.time,
                 "z": curve.z,
                 "force": curve.force,
-                "segment": np.where(curve.segment == 1, "hold", "approach"),
+                "segment": np.array(SEGMENTS)[curve.segment],
             }
         )
         meta = replace(self.meta, contact_point="known", reference_curve=name, noise_std=None)

@@ -12,7 +12,7 @@ import torch
 from ptwin.data.noise import NoiseModel
 from ptwin.diagnosis.confidence import Grade, HeldOut, grade, held_out_curves
 from ptwin.diagnosis.design import ExperimentDesign, Prediction
-from ptwin.diagnosis.intervals import profile_interval
+from ptwin.diagnosis.intervals import profile_interval, within
 from ptwin.diagnosis.locate import Mismatch, locate
 from ptwin.diagnosis.name import Candidate, choose, confounded, fit_candidates, rejected
 from ptwin.diagnosis.null import StructureTest, structure_test
@@ -23,7 +23,7 @@ from ptwin.fitting.physics_fit import PhysicsFit, rmse
 from ptwin.fitting.pointwise import ApparentPermeability
 from ptwin.fitting.split import Split
 from ptwin.physics.elastic import ReferenceCurve
-from ptwin.physics.model import PERMEABILITY, smooth_contact_radius
+from ptwin.physics.model import PERMEABILITY, PLAUSIBLE_PERMEABILITY, smooth_contact_radius
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
@@ -258,7 +258,8 @@ def _select(candidates: dict, s: DiagnosisSettings, test: StructureTest, flexibl
 def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings) -> list[tuple[str, ...]]:
     """Subsets that explain the data about as well as the chosen one; with nothing named, the term the
     information criterion alone prefers and the single terms that explain the data as well as the base
-    model does but with a materially different K (K is then not fixed by the data)."""
+    model does, with values samples of the field have, but with a materially different K (K is then not
+    fixed by the data; a K of 1e305 m² beside m = 2800 is no rival, only a degenerate parametrisation)."""
     if pick.chosen:
         return confounded(candidates, pick.chosen, s.bic_margin, s.heldout_margin)
     if pick.unexplained:
@@ -270,6 +271,7 @@ def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings) -> list[tu
         if len(t) == 1
         and t != pick.preferred
         and c.usable
+        and not c.fit.implausible
         and c.fit.bic - base.bic < s.bic_margin
         and _other_permeability(c.fit, base)
     ]
@@ -478,6 +480,7 @@ def _permeability(c: _Context, alternatives: list[Candidate], unexplained: bool)
             None if interval[0] is None or not bounded else min(interval[0], k * math.exp(-spread)),
             None if interval[1] is None or not bounded else max(interval[1], k * math.exp(spread)),
         ]
+    interval = within(interval, PLAUSIBLE_PERMEABILITY)
     return {
         "base": c.candidates[()].fit.permeability,
         "corrected": corrected.permeability,

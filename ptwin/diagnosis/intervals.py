@@ -73,6 +73,13 @@ def profile_interval(
     return sides[0], sides[1]
 
 
+def within(interval: list[float | None], plausible: tuple[float, float]) -> list[float | None]:
+    """``interval`` with each side beyond the ``plausible`` range (low, high) open (None): a bound no sample
+    could be near (K < 7e26 m², from a profile that never closed) says nothing."""
+    low, high = interval
+    return [None if low is None or low < plausible[0] else low, None if high is None or high > plausible[1] else high]
+
+
 def _side(excess, first: float) -> float | None:
     """The offset where ``excess`` crosses zero, from 0 (where it is −√3.84) outward through ``first``."""
     inside, g_inside = 0.0, -math.sqrt(LEVEL)

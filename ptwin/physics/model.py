@@ -16,6 +16,9 @@ from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
 PERMEABILITY = "fluid.log_permeability"  # K's name among a ForceModel's parameters
+# K [m²] of the soft porous materials AFM indents (dense cartilage ~1e-19, open agarose ~1e-13), with wide
+# margins: a bound on K beyond them says nothing about a sample.
+PLAUSIBLE_PERMEABILITY = (1e-24, 1e-9)
 
 
 def smooth_contact_radius(depth: torch.Tensor, probe_radius: float) -> torch.Tensor:

@@ -29,21 +29,21 @@ from ptwin.synth.maps import MapLayout, write_map
 from ptwin.synth.simulator import EFFECTS, Experiment, Hold, simulate
 
 
-def parse_holds(items: list[str], speeds: list[float] | None = None) -> tuple[Hold, ...]:
+def parse_holds(items: list[str], speeds: list[float] | None = None, creep: bool = False) -> tuple[Hold, ...]:
     """``DEPTH:SECONDS`` (a ramp-and-hold at every speed: each of ``speeds`` where given) or
-    ``DEPTH:SECONDS:SPEED`` (at one), SI units."""
-    holds = []
+    ``DEPTH:SECONDS:SPEED`` (at one), SI units; ``creep``: the force held instead of the base."""
+    option, holds = "--creep" if creep else "--hold", []
     for item in items:
         try:
             values = [float(part) for part in item.split(":")]
         except ValueError:
-            raise SystemExit(f"--hold {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED in SI units") from None
+            raise SystemExit(f"{option} {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED in SI units") from None
         if len(values) not in (2, 3) or values[0] <= 0 or values[1] < 0 or (len(values) == 3 and values[2] <= 0):
-            raise SystemExit(f"--hold {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED, depth and speed > 0")
+            raise SystemExit(f"{option} {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED, depth and speed > 0")
         if len(values) == 3 or speeds is None:
-            holds.append(Hold(*values))
+            holds.append(Hold(*values, creep=creep))
         else:
-            holds += [Hold(*values, speed) for speed in speeds]
+            holds += [Hold(*values, speed, creep) for speed in speeds]
     return tuple(holds)
 
 
@@ -88,6 +88,12 @@ def _parser(defaults: Experiment) -> argparse.ArgumentParser:
         help="DEPTH:SECONDS[:SPEED]: also record ramp-and-holds (approach to depth w, base fixed), repeatable",
     )
     parser.add_argument(
+        "--creep",
+        action="append",
+        default=[],
+        help="DEPTH:SECONDS[:SPEED]: also record creeps (approach to depth w, the force held there), repeatable",
+    )
+    parser.add_argument(
         "--next-experiment",
         type=Path,
         help="a diagnosis.json: also record the next experiment each of its confounded groups proposes",
@@ -101,7 +107,7 @@ def _parser(defaults: Experiment) -> argparse.ArgumentParser:
     parser.add_argument(
         "--holds-only",
         action="store_true",
-        help="record the ramp-and-holds alone (a --hold without SPEED at each of --speeds), no approach-only curves",
+        help="record the holds and creeps alone (one without SPEED at each of --speeds), no approach-only curves",
     )
     parser.add_argument("--samples", type=int, default=defaults.samples, help="per curve")
     parser.add_argument("--z-start", type=float, default=defaults.z_start, help="first base displacement [m] (< 0)")
@@ -156,6 +162,7 @@ def main(argv: list[str] | None = None) -> None:
             baseline_offset=args.baseline_offset,
             tilt=args.tilt,
             holds=parse_holds(args.hold, args.speeds if args.holds_only else None)
+            + parse_holds(args.creep, args.speeds if args.holds_only else None, creep=True)
             + proposed_holds(args.next_experiment),
             seed=args.seed,
             effects=parse_effects(args.effect),

@@ -28,7 +28,7 @@ import torch
 from scipy.integrate import solve_ivp
 
 from ptwin.data.kinematics import contact_radius
-from ptwin.data.recordings import Meta
+from ptwin.data.recordings import APPROACH, CREEP, HOLD, SEGMENTS, Meta
 from ptwin.pgd.reference import force_coefficient
 from ptwin.physics.elastic import hertz_force, hertz_stiffness
 from ptwin.physics.fluid_force import FluidForce
@@ -55,11 +55,19 @@ EFFECTS = {**{name: tuple(VOCABULARY[name].PARAMS) for name in SIMULATED}, **OUT
 class Hold:
     """A ramp-and-hold: approach until the indentation depth reaches ``depth`` [m], then the base stays
     fixed for ``seconds`` [s] (the tip keeps creeping while the force relaxes through the cantilever;
-    0: an approach to that depth). ``speed``: the approach's [m/s]; None: at every base speed."""
+    0: an approach to that depth). ``speed``: the approach's [m/s]; None: at every base speed.
+    ``creep``: a creep compliance instead: the feedback holds the force reached there for ``seconds``
+    (the base follows the tip as it sinks in)."""
 
     depth: float
     seconds: float
     speed: float | None = None
+    creep: bool = False
+
+    @property
+    def suffix(self) -> str:
+        """Of the curve's id: v5h for a hold, v5c for a creep."""
+        return "c" if self.creep else "h"
 
     @classmethod
     def proposed(cls, next_experiment: dict) -> tuple[Hold, ...]:
@@ -137,7 +145,7 @@ class CurveSimulation:
     force: np.ndarray
     depth: np.ndarray
     balance_residual: np.ndarray
-    segment: np.ndarray  # 0 approach, 1 hold
+    segment: np.ndarray  # APPROACH, HOLD or CREEP
     base_speed: np.ndarray  # [m/s] per sample (0 in a hold)
 
 
@@ -162,15 +170,19 @@ def simulate_curve(
     effective_modulus: float | None = None,
     hold: Hold | None = None,
     balance: bool = True,
+    budget: int | None = None,
 ) -> CurveSimulation:
     """The noise-free curve at base speed ``speed`` (on a spot of ``effective_modulus``, default the
     experiment's): an approach to ``z_end``, or, with ``hold``, an approach until the indentation depth
     reaches ``hold.depth`` and then the base fixed for ``hold.seconds``. ``balance=False`` skips the
-    force balance's residual (zeros; it costs a model evaluation per sample)."""
+    force balance's residual (zeros; it costs a model evaluation per sample). ``budget``: the most
+    evaluations of the state equations the curve may take (a ``SimulationBudget`` error past it; None:
+    no limit): what a caller trying many candidates spends on one whose values make it stiff."""
     e = replace(experiment, effective_modulus=effective_modulus or experiment.effective_modulus)
     drag = e.param("cantilever_drag", "b") * speed
     kernel = power_law_modes(e, speed, hold)
-    rates = _balance(e, speed, drag, kernel)
+    spent = _Spent(budget)
+    rates = spent.counted(_balance(e, speed, drag, kernel))
     contact_time = (drag / e.spring_constant - e.z_start) / speed  # tip reaches the surface: z − drag/k = 0
     # Time since contact keeps the first, tiny steps representable. Right after contact every force is
     # negligible and the tip moves with the base: start on w = v·τ0.
@@ -201,7 +213,9 @@ def simulate_curve(
     if not ramp.success or not ramp.t_events[0].size:
         raise RuntimeError(f"simulation of the {curve_id(speed)} ramp to {hold.depth:.3g} m failed: {ramp.message}")
     stop = ramp.t_events[0][0]
-    held = _balance(e, 0.0, drag, kernel, stop * speed)
+    # A creep holds the force recorded at the stop, the drag (on the nearly still base) in the sample's share.
+    setpoint = e.spring_constant * (stop * speed - ramp.y_events[0][0][0]) + drag if hold.creep else None
+    held = spent.counted(_balance(e, 0.0, drag, kernel, stop * speed, setpoint))
     fixed = solve_ivp(
         held,
         (stop, stop + max(hold.seconds, 1e-12 * stop)),
@@ -216,14 +230,42 @@ def simulate_curve(
     after = since > first
     in_ramp = since[after] <= stop
     states = np.where(in_ramp, ramp.sol(np.minimum(since[after], stop)), fixed.sol(np.maximum(since[after], stop)))
-    segment = np.where(since > stop, 1, 0)
-    return _record(e, speed, drag, time, after, states, segment, rates, balance, held, stop)
+    segment = np.where(since > stop, CREEP if hold.creep else HOLD, APPROACH)
+    return _record(e, speed, drag, time, after, states, segment, rates, balance, held, stop, setpoint)
 
 
-def _balance(e: Experiment, speed: float, drag: float, kernel, stopped: float | None = None):
+class SimulationBudget(RuntimeError):
+    """A curve took more evaluations of its state equations than its budget."""
+
+
+@dataclass
+class _Spent:
+    """Evaluations of the state equations of one curve, against its budget (None: none)."""
+
+    budget: int | None
+    evaluations: int = 0
+
+    def counted(self, rates):
+        if self.budget is None:
+            return rates
+
+        def counting(since_contact, state, balance=False):
+            self.evaluations += 1
+            if self.evaluations > self.budget:
+                raise SimulationBudget(f"more than {self.budget} evaluations of the force balance")
+            return rates(since_contact, state, balance)
+
+        counting.states = rates.states
+        return counting
+
+
+def _balance(
+    e: Experiment, speed: float, drag: float, kernel, stopped: float | None = None, setpoint: float | None = None
+):
     """The state equations (w, q, F_p, q_j)' of the force balance k(z − w) = c0·F_el + Σ c_j q_j + g·q +
     F_fluid + π·γ·R·ẇ (+ b·v), in time since contact, the base moving at ``speed`` (or fixed at
-    ``stopped`` past the contact, where the drag b·v has ended); ``kernel``: the power law's (c0, c_j, τ_j);
+    ``stopped`` past the contact, where the drag b·v has ended; or, with ``setpoint`` [N], moved by a
+    feedback that holds k(z − w) there: a creep); ``kernel``: the power law's (c0, c_j, τ_j);
     ``balance=True``: the balance's residual instead [N]."""
     rho, k, mu, H0 = e.probe_radius, e.spring_constant, e.fluid_viscosity, e.sample_thickness
     gamma = e.param("solid_viscosity", "gamma")
@@ -233,6 +275,7 @@ def _balance(e: Experiment, speed: float, drag: float, kernel, stopped: float | 
     lagging = "pore_pressure_relaxation" in e.effects
     coefficient = fluid_coefficient_law(e)
     c0, weights, times = kernel
+    spring = 0.0 if setpoint is not None else k  # what the balance's force changes by per unit of w (at fixed z)
 
     def rates(since_contact, state, balance=False):
         w, q, pore, *modes = state
@@ -242,7 +285,8 @@ def _balance(e: Experiment, speed: float, drag: float, kernel, stopped: float | 
         stiffness = hertz_stiffness(w, e.effective_modulus, rho)
         # k(z − w) − drag with z − drag/k = v·τ exactly: no cancellation at first contact.
         base = speed * since_contact if stopped is None else stopped + drag / k
-        unbalanced = k * (base - w) - c0 * hertz_force(w, e.effective_modulus, rho) - weights @ modes
+        held = k * (base - w) if setpoint is None else setpoint
+        unbalanced = held - c0 * hertz_force(w, e.effective_modulus, rho) - weights @ modes
         unbalanced = unbalanced - g * q
         if not lagging:
             w_rate = unbalanced / (fluid_coefficient + np.pi * gamma * radius)
@@ -252,8 +296,8 @@ def _balance(e: Experiment, speed: float, drag: float, kernel, stopped: float | 
             if gamma > 0:
                 w_rate = (unbalanced - pore) / (np.pi * gamma * radius)
             else:
-                w_rate = (k * speed + g * q / tau + (weights / times) @ modes + pore / tau_p) / (
-                    k + (c0 + g + weights.sum()) * stiffness + fluid_coefficient / tau_p
+                w_rate = (spring * speed + g * q / tau + (weights / times) @ modes + pore / tau_p) / (
+                    spring + (c0 + g + weights.sum()) * stiffness + fluid_coefficient / tau_p
                 )
             pore_rate = (fluid_coefficient * w_rate - pore) / tau_p
         if balance:
@@ -290,21 +334,26 @@ def _integrate(rates, span, start, e: Experiment, times) -> np.ndarray:
     return solution.y
 
 
-def _record(e, speed, drag, time, after, states, segment, rates, balance, held=None, stop=np.inf) -> CurveSimulation:
-    """The recorded curve: base z, force k(z − w) (+ drift), depth, the balance residual, segments."""
+def _record(
+    e, speed, drag, time, after, states, segment, rates, balance, held=None, stop=np.inf, setpoint=None
+) -> CurveSimulation:
+    """The recorded curve: base z, force k(z − w) (+ drift), depth, the balance residual, segments; with a
+    ``setpoint`` [N], the base after ``stop`` where the feedback held the force at it (a creep)."""
     k = e.spring_constant
     contact_time = (drag / k - e.z_start) / speed
     since = time - contact_time
     z_true = e.z_start + speed * np.minimum(time, contact_time + stop)
     depth = np.minimum(z_true - np.where(since > stop, 0.0, drag) / k, 0.0)
     depth[after] = states[0]
+    if setpoint is not None:
+        z_true = np.where(since > stop, depth + setpoint / k, z_true)
     residual = np.zeros_like(time)
     if balance:
         residual[after] = [(rates if t <= stop else held)(t, y, balance=True) for t, y in zip(since[after], states.T)]
     drift = e.param("force_drift", "rate") * time
     delta = e.param("contact_offset", "delta")
     force = k * (z_true - depth) + drift
-    speeds = np.where(segment == 1, 0.0, speed)
+    speeds = np.where(segment == APPROACH, speed, 0.0)
     return CurveSimulation(time, z_true + delta, force, depth, residual, segment, speeds)
 
 
@@ -329,8 +378,8 @@ def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
         z = curve.z + (e.contact_error * artefacts.standard_normal() if e.contact_point == "estimate" else 0.0)
         columns = {"curve": curve_id(speed, replicate), "base_speed": curve.base_speed, "time": curve.time}
         if hold is not None:
-            columns["curve"] += "h" if number == 1 else f"h{number}"
-            columns["segment"] = np.where(curve.segment == 1, "hold", "approach")
+            columns["curve"] += hold.suffix if number == 1 else f"{hold.suffix}{number}"
+            columns["segment"] = np.array(SEGMENTS)[curve.segment]
         frames.append(pd.DataFrame({**columns, "z": z, "force": curve.force + offset + noise}))
         if slowest is None or speed < slowest[0]:
             slowest = (speed, columns["curve"])
