@@ -1,6 +1,7 @@
 """Ramp-and-hold physics against closed forms, the simulator's balance, and the force model."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -87,6 +88,21 @@ def test_velocity_is_not_smeared_across_the_ramp_hold_corner():
     velocity = segmented_derivative(time, depth, 101, segment)
     np.testing.assert_allclose(velocity[segment == 0], 3e-6, rtol=1e-9)
     np.testing.assert_allclose(velocity[segment == 1], 0.0, atol=1e-15)  # rounding only: 3 µm/s before
+
+
+def test_the_tips_motion_as_the_cantilever_relaxes_is_not_smeared_over_the_hold():
+    # When the base stops the tip moves on for ~τ = C/(k_s + dF_el/dw) ≈ 1 ms here, carrying a Darcy force
+    # of tens of nN: the hold's velocity windows grow from one sample, so they follow it (a 60-sample
+    # window, the approach's, spread it over 30 ms and left 30–60 noise std of misfit there).
+    experiment = Experiment(z_start=-1e-6, sample_rate=2000.0, noise_std=0.0)
+    curve = simulate_curve(experiment, 10e-6, hold=Hold(3e-6, 0.2))
+    velocity = segmented_derivative(curve.time, curve.depth, 60, curve.segment)
+    fine = simulate_curve(replace(experiment, sample_rate=200_000.0), 10e-6, hold=Hold(3e-6, 0.2))
+    true = np.interp(curve.time, fine.time, np.gradient(fine.depth, fine.time))
+    hold = np.flatnonzero(curve.segment == HOLD)
+    early = hold[2:20]  # 1–10 ms: the tip's motion decays from ~1 µm/s to nothing
+    assert np.abs(true[hold[2]]) > 0.3e-6
+    np.testing.assert_allclose(velocity[early], true[early], atol=0.1 * np.abs(true[hold[2]]))
 
 
 @pytest.mark.parametrize(

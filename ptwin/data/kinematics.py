@@ -99,26 +99,34 @@ def window_line(x: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray, at
 
 
 def segmented_derivative(time: np.ndarray, values: np.ndarray, window: int, segment: np.ndarray) -> np.ndarray:
-    """``smoothed_derivative`` within each run of equal ``segment`` codes, never across two."""
+    """``smoothed_derivative`` within each run of equal ``segment`` codes, never across two; after the
+    approach (a hold, a creep) with windows that grow with the time since the segment began."""
     result = np.empty_like(values)
     edges = np.flatnonzero(np.r_[True, segment[1:] != segment[:-1], True])
     for lo, hi in zip(edges[:-1], edges[1:]):
         if hi - lo >= 2:
-            result[lo:hi] = smoothed_derivative(time[lo:hi], values[lo:hi], window)
+            growing = segment[lo] != APPROACH
+            result[lo:hi] = smoothed_derivative(time[lo:hi], values[lo:hi], window, growing)
         else:
             result[lo:hi] = 0.0  # one sample alone in its segment has no slope of its own
     return result
 
 
-def smoothed_derivative(time: np.ndarray, values: np.ndarray, window: int) -> np.ndarray:
+def smoothed_derivative(time: np.ndarray, values: np.ndarray, window: int, growing: bool = False) -> np.ndarray:
     """Slope of a least-squares line over a centred window of ``window`` samples.
 
     Works on non-uniform time; the window shrinks (stays centred where possible) at
-    the ends.
+    the ends. ``growing``: sample j's window reaches at most j/2 samples either side, so it
+    widens with the time since the first sample (a relaxation is read on a log time axis):
+    when the base stops, the tip keeps moving for a millisecond or so while the cantilever
+    relaxes (τ = F_D/U over k_s + dF_el/dw), and a full window there smeared that motion, and
+    the Darcy force it carries, over tens of milliseconds.
     """
     n = len(values)
     index = np.arange(n)
-    half = max(1, window // 2)
+    half = np.full(n, max(1, window // 2))
+    if growing:
+        half = np.clip(index // 2, 1, half)
     lo, hi = np.clip(index - half, 0, n - 1), np.clip(index + half, 0, n - 1)
     return window_line(time, values, lo, hi, time)[1]
 
