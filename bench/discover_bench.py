@@ -14,8 +14,9 @@ Four suites of its own, each a table, then the shared development sets (``bench/
 - ``rheology``: power-law rheology on five speeds (α within 10% too), the hereditary
   terms with a ramp-and-hold beside the approaches, a weak power law on a soft
   cantilever at three speeds (right: confounded with the base model, K interval covering
-  the truth, the separating experiment proposed), and each relaxation (and none) in one
-  ramp-and-hold curve alone, the standard stress relaxation of a spot.
+  the truth, the separating experiment proposed), each relaxation (and none) in one
+  ramp-and-hold curve alone, the standard stress relaxation of a spot, and protocols mixed
+  in one set (approaches, a stress relaxation and a creep).
 
 A case is right when the named terms are the concealed ones (nulls: none; the outside
 effect: unexplained) with K within 5%; or, honestly, when nothing is claimed beyond weak
@@ -114,6 +115,8 @@ LOOP = [
 HOLD = {"holds": (Hold(2.0e-6, 1.0, 8.0e-6),)}
 # One ramp-and-hold curve and nothing else: the standard stress relaxation of a spot.
 ONE_CURVE = {"base_speeds": (), "holds": (Hold(3.0e-6, 3.0, 10.0e-6),), "z_start": -3.0e-6, "sample_rate": 2000.0}
+# Protocols mixed in one set: approaches at two speeds, a stress relaxation and a creep on the same spot.
+MIXED = {"base_speeds": (2.0e-6, 20.0e-6), "holds": (Hold(2.0e-6, 1.0, 8.0e-6), Hold(2.0e-6, 1.0, 8.0e-6, creep=True))}
 RHEOLOGY = [
     Case("power law, five speeds", {"power_law_rheology": {"alpha": 0.1}}, params_within=0.1),
     Case("power law, hold", {"power_law_rheology": {"alpha": 0.1}}, HOLD, params_within=0.1),
@@ -124,6 +127,8 @@ RHEOLOGY = [
     Case("pore, one ramp-and-hold", {"pore_pressure_relaxation": {"M": 3.0e4}}, ONE_CURVE),
     Case("power law, one ramp-and-hold", {"power_law_rheology": {"alpha": 0.1}}, ONE_CURVE, params_within=0.1),
     Case("null, one ramp-and-hold", setting=ONE_CURVE),
+    Case("relaxation, hold + creep", {"solid_relaxation": {"g": 0.2, "tau": 0.5}}, MIXED),
+    Case("pore, hold + creep", {"pore_pressure_relaxation": {"M": 3.0e4}}, MIXED),
 ]
 SUITES = {"original": ORIGINAL, "realism": REALISM, "loop": LOOP, "rheology": RHEOLOGY}
 # With estimated contacts drag is removed with the baselines and the offset fitted as a nuisance: no name.

@@ -186,3 +186,11 @@ def test_structure_left_is_unexplained_only_where_the_hybrid_twin_predicts_bette
     pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, twin_rmse)
     assert pick.structured and pick.chosen == named and pick.unexplained == (not named)
     assert _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None).unexplained  # no twin: no witness
+
+
+def test_an_experiment_two_groups_share_is_said_once():
+    from ptwin.diagnosis.words import _to_tell_apart
+
+    hold = {"tell_apart": "a hold at constant depth"}
+    sentence = _to_tell_apart([hold, dict(hold), {"tell_apart": "a deeper indent"}])
+    assert sentence == " To tell them apart, record a hold at constant depth; a deeper indent."

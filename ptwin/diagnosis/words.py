@@ -116,7 +116,7 @@ def _called(name: str) -> str:
 
 
 def _to_tell_apart(groups: list[dict]) -> str:
-    tell = "; ".join(record for record in map(_record, groups) if record)
+    tell = "; ".join(dict.fromkeys(record for record in map(_record, groups) if record))  # groups may share one
     return f" To tell them apart, record {tell}." if tell else ""
 
 
