@@ -176,3 +176,19 @@ def test_anything_unforeseen_at_a_spot_is_its_row_and_its_traceback_comes_back(
     stored = json.loads((tmp_path / "out" / "spots" / "only.json").read_text())
     assert "ZeroDivisionError: a bug" in stored["traceback"]
     assert (tmp_path / "out" / "report.md").read_text().count("unexpected ZeroDivisionError") == 1
+
+
+def test_a_map_of_stress_relaxations_is_diagnosed_spot_by_spot(tmp_path, coarse_cache):
+    # One ramp-and-hold curve per spot, the standard poroelastic map; pore relaxation in the central disc.
+    folder = tmp_path / "map"
+    synth(
+        ["--map", "2", "2", "--out", str(folder), "--truth", str(tmp_path / "truth.csv"), "--holds-only"]
+        + ["--speeds", "10e-6", "--hold", "3e-6:1.0", "--sample-rate", "2000", "--z-start=-2e-6"]
+        + ["--region-effect", "pore_pressure_relaxation:M=3e4", "--region-radius", "1e-9"]
+    )
+    assert load_recordings(folder / "spot_000_000").curve_ids == ["v10h"]
+    settings = map_settings(folder, coarse_cache, "map.scheduler=serial")
+    run_map(settings, tmp_path / "out", progress=lambda _: None)
+    table = pd.read_csv(tmp_path / "out" / "spots.csv").merge(pd.read_csv(tmp_path / "truth.csv"), on="spot")
+    assert list(table["status"]) == ["ok"] * 4
+    np.testing.assert_allclose(table["permeability_x"], table["permeability_y"], rtol=0.05)
