@@ -111,3 +111,4 @@ def test_a_bound_beyond_what_any_sample_has_is_no_bound():
     assert within([1e-30, 2e-16], plausible) == [None, 2e-16]
     assert within([1e-17, 2e-16], plausible) == [1e-17, 2e-16]
     assert within([None, 2e-16], plausible) == [None, 2e-16]
+    assert within([2.7e23, None], plausible) == [None, None]

@@ -461,13 +461,13 @@ def _float_or_none(value: float | None) -> float | None:
 def _permeability(c: _Context, alternatives: list[Candidate], unexplained: bool) -> dict:
     """K of the base and corrected models; the corrected model's 95% profile interval, widened to cover
     the 95% range of K of every candidate that explains the data as well (so a K the data cannot fix
-    shows). With structure left unexplained no interval holds (the model misses the data): None."""
+    shows). With structure left unexplained no interval holds (the model misses the data), and no std."""
     corrected = c.corrected.fit
     if unexplained:
         return {
             "base": c.candidates[()].fit.permeability,
             "corrected": corrected.permeability,
-            "corrected_std": corrected.permeability_std,
+            "corrected_std": None,
             "corrected_interval": [None, None],
         }
     raw_std = corrected.permeability_std / corrected.permeability

@@ -74,10 +74,10 @@ def profile_interval(
 
 
 def within(interval: list[float | None], plausible: tuple[float, float]) -> list[float | None]:
-    """``interval`` with each side beyond the ``plausible`` range (low, high) open (None): a bound no sample
-    could be near (K < 7e26 m², from a profile that never closed) says nothing."""
-    low, high = interval
-    return [None if low is None or low < plausible[0] else low, None if high is None or high > plausible[1] else high]
+    """``interval`` with each side outside the ``plausible`` range (low, high) open (None): a bound no sample
+    could be near (K < 7e26 m², from a profile that never closed; K > 3e23 m², from a fit run off into a
+    degenerate corner) says nothing."""
+    return [None if side is None or not plausible[0] <= side <= plausible[1] else side for side in interval]
 
 
 def _side(excess, first: float) -> float | None:
