@@ -8,12 +8,12 @@ import time
 
 import torch
 import yaml
-from ptwin.pgd.verify import verify
 
 from ptwin.pgd.build import build_basis
 from ptwin.pgd.config import PGDConfig
 from ptwin.pgd.problem import build_problem
 from ptwin.pgd.reference import discrete_force_coefficient
+from ptwin.physics.fluid_accuracy import verify
 from ptwin.physics.fluid_force import FluidForce
 
 

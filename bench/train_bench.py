@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def warm_run_seconds() -> float:
-    subprocess.run([sys.executable, "-m", "ptwin.pgd", "--help"], cwd=ROOT, capture_output=True)  # warm imports
+    subprocess.run([sys.executable, "-m", "ptwin.basis", "--help"], cwd=ROOT, capture_output=True)  # warm imports
     with tempfile.TemporaryDirectory() as out:
         started = time.perf_counter()
         subprocess.run([sys.executable, "train.py", f"hydra.run.dir={out}"], cwd=ROOT, check=True, capture_output=True)

@@ -58,7 +58,14 @@ def test_the_basis_command_builds_where_train_py_looks(tmp_path):
     from tests.conftest import settings_for
 
     result = subprocess.run(
-        [sys.executable, "-m", "ptwin.pgd", "pgd=coarse", f"cache_dir={tmp_path}", f"hydra.run.dir={tmp_path / 'run'}"],
+        [
+            sys.executable,
+            "-m",
+            "ptwin.basis",
+            "pgd=coarse",
+            f"cache_dir={tmp_path}",
+            f"hydra.run.dir={tmp_path / 'run'}",
+        ],
         cwd=ROOT,
         capture_output=True,
         text=True,

@@ -1,8 +1,9 @@
-"""python -m ptwin.pgd pgd=<default|precise|paper> [pgd.coordinates=paper] [out=<file>]
+"""python -m ptwin.basis pgd=<default|precise|paper> [pgd.coordinates=paper] [out=<file>]
 
 Builds a basis, saves it (by default into the cache, where train.py looks for it),
 prints modes, time, peak memory and its errors against the closed form and against a
-direct solve of the same discrete problem."""
+direct solve of the same discrete problem. A face beside train.py: it uses the PGD solver
+below physics and the fluid layer's check in physics, so it sits above both."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from ptwin.physics.fluid_accuracy import verify
 register()
 
 
-@hydra.main(version_base="1.3", config_path="../../configs", config_name="pgd_build")
+@hydra.main(version_base="1.3", config_path="../configs", config_name="pgd_build")
 def main(cfg: DictConfig) -> None:
     with one_line_errors(Path(HydraConfig.get().runtime.output_dir)):
         settings = typed(cfg)
