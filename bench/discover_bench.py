@@ -9,7 +9,8 @@ Four suites of its own, each a table, then the shared development sets (``bench/
   under a tilted, offset baseline, a soft cantilever at three speeds a factor 3 apart,
   two speeds, replicates, spots of different stiffness — nulls and each term;
 - ``loop``: soft-cantilever sets whose approach curves leave candidates confounded; the
-  next experiments ptwin proposes, recorded from the same truth; ptwin again. Right:
+  next experiments ptwin proposes (for its confounded groups and its terms below strong),
+  recorded from the same truth; ptwin again, round after round (at most three). Right:
   the concealed term named strong with K within 5%;
 - ``rheology``: power-law rheology on five speeds (α within 10% too), the hereditary
   terms with a ramp-and-hold beside the approaches, a weak power law on a soft
@@ -102,8 +103,10 @@ REALISM = [
     Case("strain perm., soft", {"strain_dependent_permeability": {"m": 2.0}}, SOFT),
     Case("outside: drift, correlated", {"force_drift": {"rate": 0.3e-9}}, CORRELATED),
 ]
-# The loop: approach curves that leave candidates confounded; the proposed next experiments, recorded from
-# the same truth; the diagnosis again. Right: the concealed term named strong, K within 5%.
+# The loop: approach curves that leave candidates confounded; the proposed next experiments (the confounded
+# groups' and those of terms named below strong), recorded from the same truth; the diagnosis again, for at
+# most ROUNDS rounds. Right: the concealed term named strong, K within 5%.
+ROUNDS = 3
 LOOP = [
     Case("relaxation vs pore, soft", {"solid_relaxation": {"g": 0.1, "tau": 0.1}}, SOFT),
     Case("pore vs base, soft", {"pore_pressure_relaxation": {"M": 5.0e3}}, SOFT),
@@ -213,41 +216,55 @@ def diagnose(experiment: Experiment, folder: Path, overrides: list[str]) -> tupl
     return run(typed(cfg), folder / "run", progress=lambda line: None).diagnosis, time.perf_counter() - started
 
 
+def proposed(d: dict) -> list[dict]:
+    """The distinct next experiments a diagnosis proposes: its confounded groups' and its terms below strong."""
+    proposals = [g["next_experiment"] for g in d["confounded"] if g.get("next_experiment")]
+    proposals += [e["next_experiment"] for e in d["left_out"] if e.get("next_experiment")]
+    return list({json.dumps([p["protocol"], p["repeats"]]): p for p in proposals}.values())
+
+
+def closed(case: Case, experiment: Experiment, d: dict) -> bool:
+    """The concealed terms named, each strong, with K within 5%."""
+    named = sorted(e["term"] for e in d["left_out"])
+    strong = all(e["confidence"] == "strong" for e in d["left_out"])
+    k_error = abs(d["permeability"]["corrected"] / experiment.permeability - 1)
+    return named == sorted(case.effects) and strong and k_error <= 0.05
+
+
 def loop_row(case: Case, experiment: Experiment, folder: Path, overrides: list[str]) -> tuple:
-    """Before → proposed → after, for one case of the loop."""
-    before, seconds = diagnose(experiment, folder / "before", overrides)
-    proposals = [g["next_experiment"] for g in before["confounded"] if g.get("next_experiment")]
-    distinct = {json.dumps([p["protocol"], p["repeats"]]): p for p in proposals}.values()
-    holds = tuple(hold for proposal in distinct for hold in Hold.proposed(proposal))
-    after, more = diagnose(replace(experiment, holds=holds), folder / "after", overrides) if holds else (before, 0.0)
-    expected = sorted(case.effects)
-    named = sorted(e["term"] for e in after["left_out"])
-    strong = all(e["confidence"] == "strong" for e in after["left_out"])
+    """Before → what ptwin proposes, recorded from the same truth → ptwin again, for at most ``ROUNDS`` rounds."""
+    before, seconds = diagnose(experiment, folder / "r0", overrides)
+    after, first, holds, rounds = before, proposed(before), (), 0
+    while rounds < ROUNDS and not closed(case, experiment, after) and proposed(after):
+        holds += tuple(hold for proposal in proposed(after) for hold in Hold.proposed(proposal))
+        rounds += 1
+        after, more = diagnose(replace(experiment, holds=holds), folder / f"r{rounds}", overrides)
+        seconds += more
     k_before = 100 * (before["permeability"]["corrected"] / experiment.permeability - 1)
     k_after = 100 * (after["permeability"]["corrected"] / experiment.permeability - 1)
-    right = named == expected and strong and abs(k_after) <= 5
     return (
         case.name,
         "; ".join(" ~ ".join(g["terms"]) for g in before["confounded"]) or "-",
-        "; ".join(p["sentence"].split(":")[0] for p in distinct) or "none",
+        "; ".join(p["sentence"].split(":")[0] for p in first) or "none",
         " + ".join(f"{e['term']} ({e['confidence']})" for e in after["left_out"]) or "-",
         k_before,
         k_after,
-        seconds + more,
-        "right" if right else "WRONG",
+        rounds,
+        seconds,
+        "right" if closed(case, experiment, after) else "WRONG",
     )
 
 
 def print_loop(rows: list[tuple]) -> None:
-    print("\nloop: confounded before → proposed experiment → named after")
+    print(f"\nloop: confounded before → proposed experiments recorded, round after round (at most {ROUNDS}) → named")
     print(
-        f"{'case':<28s} {'confounded before':<60s} {'proposed':<70s} {'named after':<40s} {'K %':>7s} "
-        f"{'→ K %':>7s} {'s':>6s}"
+        f"{'case':<28s} {'confounded before':<60s} {'first proposed':<70s} {'named after':<40s} {'K %':>7s} "
+        f"{'→ K %':>7s} {'rounds':>6s} {'s':>6s}"
     )
-    for case, before, proposed, after, k_before, k_after, seconds, right in rows:
+    for case, before, first, after, k_before, k_after, rounds, seconds, right in rows:
         print(
-            f"{case:<28s} {before:<60.60s} {proposed:<70.70s} {after:<40.40s} {k_before:7.2f} {k_after:7.2f} "
-            f"{seconds:6.1f} {right}"
+            f"{case:<28s} {before:<60.60s} {first:<70.70s} {after:<40.40s} {k_before:7.2f} {k_after:7.2f} "
+            f"{rounds:6d} {seconds:6.1f} {right}"
         )
     print(f"{sum(r[-1] == 'right' for r in rows)}/{len(rows)} loops right")
 
@@ -272,7 +289,8 @@ def main() -> None:
                 folder = Path(scratch) / re.sub(r"[^A-Za-z0-9]+", "_", case.name)
                 if suite == "loop":
                     rows.append(loop_row(case, experiment, folder, overrides))
-                    print(f"loop: {case.name}: {rows[-1][3]} ({rows[-1][-1]}, {rows[-1][-2]:.1f} s)", flush=True)
+                    row = rows[-1]
+                    print(f"loop: {case.name}: {row[3]} after {row[6]} rounds ({row[-1]}, {row[-2]:.1f} s)", flush=True)
                     continue
                 d, seconds = diagnose(experiment, folder, overrides)
                 rows.append(row(case, experiment, d, seconds))

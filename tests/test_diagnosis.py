@@ -1,6 +1,7 @@
 """The diagnosis names what was concealed, says nothing on clean data, and improves the fit."""
 
 import json
+import math
 
 import pytest
 
@@ -194,3 +195,24 @@ def test_an_experiment_two_groups_share_is_said_once():
     hold = {"tell_apart": "a hold at constant depth"}
     sentence = _to_tell_apart([hold, dict(hold), {"tell_apart": "a deeper indent"}])
     assert sentence == " To tell them apart, record a hold at constant depth; a deeper indent."
+
+
+def test_a_proposal_must_pass_the_validation_margin_over_everything_recorded():
+    from ptwin.diagnosis.design import curves_needed
+
+    # 20× the noise on one 500-sample curve beside 3000 recorded samples: Δχ² 400 is 11% of the set's 3500,
+    # short of (1.1² − 1) = 21%; two curves are 20% of 4000, three 27% of 4500. The information criterion
+    # alone (separation ≥ 10) would have taken one.
+    assert curves_needed(20.0, 400.0, 3000.0, 500, 0.10) == 3
+    assert curves_needed(20.0, 400.0, 300.0, 500, 0.10) == 1
+    # An excess below 21% of a curve's own noise never reaches the margin, however many are recorded.
+    assert curves_needed(9.0, 81.0, 3000.0, 500, 0.10) == math.inf
+    # A small separation needs (10 / separation)² curves for the information criterion.
+    assert curves_needed(4.0, 16.0, 0.0, 10, 0.10) == 7
+
+
+def test_a_proposed_speed_is_one_a_person_sets():
+    from ptwin.diagnosis.design import _round_down
+
+    assert _round_down(59.7708e-6) == pytest.approx(59e-6)
+    assert _round_down(45e-6) == pytest.approx(45e-6)

@@ -18,10 +18,15 @@ terms is skipped: B then reproduces A's curve whatever it is (the base model is 
 relaxation with M → ∞), and if A is true B's extra term fades to nothing, which the
 information criterion already settles. That takes fits, so every
 protocol is screened first by the candidates' difference at their current values (an
-optimistic bound: no refit) and the ``VERIFIED`` most promising are refitted. The
-proposal is the shortest verified protocol reaching ``TARGET`` with one curve, or else
-the one separating most per √time, repeated enough to reach it (at most
-``MAX_REPEATS`` curves).
+optimistic bound: no refit) and the ``VERIFIED`` most promising are refitted.
+
+A separation is enough only where the diagnosis's own rules would then tell the two apart:
+``TARGET`` for the information criterion, and the wrong one's validation RMS above the right
+one's by the held-out margin over the whole set once recorded (a curve's excess must outweigh
+10% of the noise of everything already recorded: 38× the noise on one new curve beside three
+thousand recorded samples left a pair confounded). The proposal is the verified protocol that
+reaches both in the least recording time (curves × duration, at most ``MAX_REPEATS``), or else
+the one separating most per √time, with a sentence saying it will not be enough.
 """
 
 from __future__ import annotations
@@ -92,6 +97,8 @@ class Prediction:
     time: np.ndarray  # [s]
     forces: list[np.ndarray]  # [N], one per candidate
     separation: float
+    repeats: float = 1.0  # curves of it the selection rules need to tell the candidates apart (inf: more than any)
+    pairs: dict = field(default_factory=dict)  # (i, j) of candidates, i < j → the curves that pair needs
 
 
 @dataclass
@@ -112,23 +119,34 @@ class ExperimentDesign:
     samples: Samples
     index: torch.Tensor
     smoothing: float = 0.05
+    heldout_margin: float = 0.10  # the selection rules' validation-RMS margin (``DiagnosisSettings``)
     _simulated: dict = field(default_factory=dict, repr=False)  # (candidate, protocol) → CurveSimulation
-    _refitted: dict = field(default_factory=dict, repr=False)  # (truth, candidate, protocol) → χ²
+    _refitted: dict = field(default_factory=dict, repr=False)  # (candidate, truth, protocol) → χ² refitted
 
     def propose(self, names: list[str], fits: list[PhysicsFit]) -> tuple[dict, Prediction] | None:
-        """``next_experiment`` for the candidates ``fits`` (named ``names``) and its prediction, or None
-        when a candidate has a term the simulator cannot predict or no protocol separates them."""
+        """``next_experiment`` for the candidates ``fits`` (named ``names``; two or more: every pair must be
+        told apart) and its prediction, or None when a candidate has a term the simulator cannot predict or
+        no protocol separates them."""
         if any(term not in SIMULATED for fit in fits for term in fit.terms):
             return None
         screened = sorted(self._screen(names, fits), key=self._merit, reverse=True)
         if not screened:
             return None
-        directions = [(a, b) for a, b in ((fits[0], fits[1]), (fits[1], fits[0])) if not set(a.terms) <= set(b.terms)]
+        pairs = itertools.permutations(range(len(fits)), 2)
+        directions = [(i, j) for i, j in pairs if not set(fits[i].terms) <= set(fits[j].terms)]
         for prediction in screened[:VERIFIED]:
-            prediction.separation = min(self._refit_separation(prediction.protocol, a, b) for a, b in directions)
+            refitted = {(i, j): self._refit_separation(prediction.protocol, fits[i], fits[j]) for i, j in directions}
+            prediction.separation = min(separation for separation, _ in refitted.values())
+            for (i, j), (_, repeats) in refitted.items():
+                pair = (min(i, j), max(i, j))
+                prediction.pairs[pair] = max(prediction.pairs.get(pair, 0.0), repeats)
+            prediction.repeats = max(prediction.pairs.values())
         verified = screened[:VERIFIED]
-        reaching = [p for p in verified if p.separation >= TARGET]
-        best = min(reaching, key=self._duration) if reaching else max(verified, key=self._merit)
+        reaching = [p for p in verified if p.repeats <= MAX_REPEATS]
+        if reaching:
+            best = min(reaching, key=lambda p: p.repeats * self._duration(p))
+        else:
+            best = max(verified, key=self._merit)
         if best.separation < 1.0:
             return None  # refitted, the candidates explain every protocol of the menu alike
         return self._proposal(names, best), best
@@ -153,16 +171,19 @@ class ExperimentDesign:
         return prediction.separation / math.sqrt(self._duration(prediction))
 
     def _proposal(self, names: list[str], best: Prediction) -> dict:
-        repeats = 1
-        if 0 < best.separation < TARGET:
-            repeats = min(MAX_REPEATS, math.ceil((TARGET / best.separation) ** 2))
+        repeats = int(min(best.repeats, MAX_REPEATS))
         separation = best.separation * math.sqrt(repeats)
         duration = self._duration(best)
         curves = f" ({repeats} curves)" if repeats > 1 else ""
         sentence = (
-            f"{best.protocol.words()}{curves}: refitted to it, {' and '.join(names)} would still differ by "
+            f"{best.protocol.words()}{curves}: refitted to it, {_listed(names)} would still differ by "
             f"{separation:.1f}× the noise (the root of the Δχ² it adds under the noise model), {duration:.3g} s a curve"
         )
+        if best.repeats > MAX_REPEATS:
+            sentence += (
+                f"; not enough for the {100 * self.heldout_margin:.0f}% validation margin ptwin's rules need to tell "
+                f"them apart, which no protocol of its menu reaches in {MAX_REPEATS} curves"
+            )
         return {
             "protocol": best.protocol.segments(),
             "repeats": repeats,
@@ -178,8 +199,9 @@ class ExperimentDesign:
         menu = [Protocol(fastest, depth, seconds) for seconds in holds]
         recordable = self.free_travel / (BASELINE_SAMPLES * self.step)  # fastest speed that keeps a baseline
         menu += [Protocol(fastest, 0.5 * depth, max(holds)), Protocol(max(slowest / 3, SPEEDS[0]), depth)]
-        if min(3 * fastest, SPEEDS[1], recordable) > fastest:
-            menu.append(Protocol(min(3 * fastest, SPEEDS[1], recordable), depth))
+        faster = _round_down(min(3 * fastest, SPEEDS[1], recordable))  # a speed a person sets on the instrument
+        if faster > fastest:
+            menu.append(Protocol(faster, depth))
         return list(dict.fromkeys(menu))
 
     def _hold_times(self, fits: list[PhysicsFit]) -> list[float]:
@@ -235,17 +257,31 @@ class ExperimentDesign:
         )
         return Prediction(protocol, list(names), curves[0].time[:length], forces, separation)
 
-    def _refit_separation(self, protocol: Protocol, truth: PhysicsFit, other: PhysicsFit) -> float:
-        """√(extra χ²/κ²) left to ``other`` over ``truth`` when both refit the data with what ``truth``
-        predicts for ``protocol`` appended."""
+    def _refit_separation(self, protocol: Protocol, truth: PhysicsFit, other: PhysicsFit) -> tuple[float, float]:
+        """(√(extra χ²/κ²) left to ``other`` over ``truth`` when both refit the data with what ``truth``
+        predicts for ``protocol`` appended, the curves of it the selection rules need: ``_curves_needed``)."""
         pseudo, stride = self._pseudo_samples(self._simulate(truth, protocol))
-        joined = self.samples.join(pseudo)
-        index = torch.cat([self.index, len(self.samples) + torch.nonzero(pseudo.in_contact).squeeze(1)])
-        chi_square = [self._refit(truth, joined, index, [truth.params]), self._refit(other, joined, index)]
+        added = torch.nonzero(pseudo.in_contact).squeeze(1)
+        chi_square = [self._refitted_to(truth, truth, protocol), self._refitted_to(other, truth, protocol)]
         if not math.isfinite(chi_square[0]):
-            return 0.0  # the truth itself cannot be refitted: no evidence either way
-        excess = (chi_square[1] - chi_square[0]) * stride / self.noise.inflation
-        return math.sqrt(max(excess, 0.0)) if math.isfinite(excess) else math.inf
+            return 0.0, math.inf  # the truth itself cannot be refitted: no evidence either way
+        excess = (chi_square[1] - chi_square[0]) * stride
+        if not math.isfinite(excess):
+            return math.inf, 1.0
+        separation = math.sqrt(max(excess, 0.0) / self.noise.inflation)
+        return separation, curves_needed(separation, excess, chi_square[0], added.numel() * stride, self.heldout_margin)
+
+    def _refitted_to(self, fit: PhysicsFit, truth: PhysicsFit, protocol: Protocol) -> float:
+        """χ² of ``fit`` refitted to the data with what ``truth`` predicts for ``protocol`` appended (the truth
+        from its own values), each once however many pairs ask."""
+        key = (id(fit), id(truth), protocol)
+        if key not in self._refitted:
+            pseudo, _ = self._pseudo_samples(self._simulate(truth, protocol))
+            joined = self.samples.join(pseudo)
+            index = torch.cat([self.index, len(self.samples) + torch.nonzero(pseudo.in_contact).squeeze(1)])
+            starts = [truth.params] if fit is truth else None
+            self._refitted[key] = self._refit(fit, joined, index, starts)
+        return self._refitted[key]
 
     def _refit(self, fit: PhysicsFit, samples: Samples, index: torch.Tensor, starts=None) -> float:
         """χ² of ``fit``'s model refitted on ``samples[index]`` from the best of ``starts`` (default: its
@@ -285,3 +321,26 @@ class ExperimentDesign:
         arrays = {name: value[::stride] for name, value in vars(kinematics).items() if isinstance(value, np.ndarray)}
         kinematics = replace(kinematics, **arrays, noise=self.noise)
         return Samples.from_curves([kinematics], self.samples.noise_inflation), stride
+
+
+def curves_needed(separation: float, excess: float, recorded: float, samples: int, heldout_margin: float) -> float:
+    """Curves of a protocol that the selection rules need to tell two candidates apart: the separation
+    reaching ``TARGET`` (n curves add n × the excess Δ), and the wrong one's validation RMS above the right
+    one's by the held-out margin g: (χ² + n·(m + Δ)) / (χ² + n·m) ≥ (1 + g)², with χ² the right one's on
+    the ``recorded`` samples (noise units) and m the ``samples`` of a curve (each adds ~1 of noise once
+    recorded). Where Δ ≤ ((1 + g)² − 1)·m no number of curves will do: inf."""
+    by_target = (TARGET / separation) ** 2 if separation > 0 else math.inf
+    share = (1.0 + heldout_margin) ** 2 - 1.0
+    by_margin = share * recorded / (excess - share * samples) if excess > share * samples else math.inf
+    return float(max(1, math.ceil(max(by_target, by_margin)))) if math.isfinite(by_margin) else math.inf
+
+
+def _listed(names: list[str]) -> str:
+    """'a and b', 'a, b and c'."""
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
+def _round_down(value: float) -> float:
+    """``value`` > 0 rounded down to two significant figures (59.77 µm/s → 59 µm/s)."""
+    scale = 10.0 ** (math.floor(math.log10(value)) - 1)
+    return math.floor(value / scale + 1e-9) * scale  # 45e-6 / 1e-6 is 44.99999…

@@ -11,7 +11,7 @@ import torch
 
 from ptwin.data.noise import NoiseModel
 from ptwin.diagnosis.confidence import Grade, HeldOut, grade, held_out_curves
-from ptwin.diagnosis.design import ExperimentDesign, Prediction
+from ptwin.diagnosis.design import MAX_REPEATS, ExperimentDesign, Prediction
 from ptwin.diagnosis.intervals import profile_interval, within
 from ptwin.diagnosis.locate import Mismatch, locate
 from ptwin.diagnosis.name import Candidate, choose, confounded, fit_candidates, rejected
@@ -336,17 +336,52 @@ def _confound(chosen: tuple[str, ...], other: tuple[str, ...], candidates: dict)
 
 
 def _tell_apart(confounds: list[dict], rivals, corrected: Candidate, candidates: dict, design, progress) -> list:
-    """Each confounded group gets the recording that best separates its candidates (``next_experiment``);
-    returns the predictions made."""
+    """Each confounded group gets the recording that best separates its candidates (``next_experiment``): one
+    that tells every candidate of every group apart where the menu has one (separating the base model from
+    each rival alone leaves the rivals confounded with each other), else each group its own. Returns the
+    predictions made."""
+    if not confounds:
+        return []
+    progress("diagnosis: simulating each confounded candidate under the experiments that could separate them")
     predictions = []
-    if confounds:
-        progress("diagnosis: simulating each confounded candidate under the experiments that could separate them")
+    if len(confounds) > 1:
+        subsets = [corrected.terms, *rivals]
+        joint = _joint_proposal(subsets, candidates, design)
+        if joint is not None:
+            proposal, prediction, told = joint
+            for group, other in zip(confounds, rivals):
+                if other in told:
+                    group["next_experiment"] = proposal
+            remaining = [(group, other) for group, other in zip(confounds, rivals) if other not in told]
+            confounds, rivals = [group for group, _ in remaining], [other for _, other in remaining]
+            predictions = [prediction]
     for group, other in zip(confounds, rivals):
         proposal = design.propose(group["terms"], [corrected.fit, candidates[other].fit])
         if proposal is not None:
             group["next_experiment"], prediction = proposal
             predictions.append(prediction)
     return predictions
+
+
+def _joint_proposal(subsets: list, candidates: dict, design):
+    """(next_experiment, prediction, the rivals it tells from ``subsets[0]`` and from each other) of one
+    recording for as many of the candidate ``subsets`` as the menu can tell apart: all of them, else without
+    those that no protocol of it separates from the others in ``MAX_REPEATS`` curves (a strain-dependent K
+    needs a deeper indent); None where fewer than three remain."""
+    names = [" + ".join(t) or "base model" for t in subsets]
+    joint = design.propose(names, [candidates[t].fit for t in subsets])
+    if joint is None:
+        return None
+    if joint[1].repeats > MAX_REPEATS:
+        apart = {i for pair, repeats in joint[1].pairs.items() if repeats > MAX_REPEATS for i in pair} - {0}
+        kept = [t for i, t in enumerate(subsets) if i not in apart]
+        if len(kept) < 3 or len(kept) == len(subsets):
+            return None
+        joint = design.propose([" + ".join(t) or "base model" for t in kept], [candidates[t].fit for t in kept])
+        if joint is None or joint[1].repeats > MAX_REPEATS:
+            return None
+        subsets = kept
+    return joint[0], joint[1], set(subsets[1:])
 
 
 def _make_strong(left_out: list[dict], chosen, candidates: dict, design: ExperimentDesign, progress) -> list:

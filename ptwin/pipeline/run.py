@@ -143,6 +143,7 @@ def _design(prepared: Prepared, settings: Settings) -> ExperimentDesign:
         samples=prepared.samples,
         index=prepared.split.train,
         smoothing=settings.data.smoothing,
+        heldout_margin=settings.diagnosis.heldout_margin,
     )
 
 
