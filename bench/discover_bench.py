@@ -289,8 +289,8 @@ def main() -> None:
                 folder = Path(scratch) / re.sub(r"[^A-Za-z0-9]+", "_", case.name)
                 if suite == "loop":
                     rows.append(loop_row(case, experiment, folder, overrides))
-                    row = rows[-1]
-                    print(f"loop: {case.name}: {row[3]} after {row[6]} rounds ({row[-1]}, {row[-2]:.1f} s)", flush=True)
+                    name, *_, after, _, _, rounds, seconds, right = rows[-1]
+                    print(f"loop: {case.name}: {after} after {rounds} rounds ({right}, {seconds:.1f} s)", flush=True)
                     continue
                 d, seconds = diagnose(experiment, folder, overrides)
                 rows.append(row(case, experiment, d, seconds))
