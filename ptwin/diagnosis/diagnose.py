@@ -15,7 +15,7 @@ from ptwin.diagnosis.design import MAX_REPEATS, ExperimentDesign, Prediction
 from ptwin.diagnosis.intervals import profile_interval, within
 from ptwin.diagnosis.locate import Mismatch, locate
 from ptwin.diagnosis.name import Candidate, choose, confounded, fit_candidates, rejected
-from ptwin.diagnosis.null import StructureTest, structure_test
+from ptwin.diagnosis.null import MODEL_ERROR, StructureTest, beyond_model_error, structure_test
 from ptwin.diagnosis.words import MATERIAL, finite_or_none, summarise
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import rmse_of
@@ -155,7 +155,7 @@ def diagnose(
     )
     base = candidates[()]
     twin = _twin_rmse(hybrid, samples, split)
-    pick = _select(candidates, s, test, twin["val_rmse"])
+    pick = _select(candidates, s, test, twin["val_rmse"], noise.std)
     with torch.no_grad():
         base_residual = base.fit.model(samples)[seen] - samples.force[seen]
     where = locate(samples, base_residual, seen, s.block, test) if pick.structured else []
@@ -216,11 +216,14 @@ class _Selection:
         return self.structured or bool(self.chosen)
 
 
-def _select(candidates: dict, s: DiagnosisSettings, test: StructureTest, flexible: float | None) -> _Selection:
+def _select(
+    candidates: dict, s: DiagnosisSettings, test: StructureTest, flexible: float | None, noise_std: float
+) -> _Selection:
     """Structure in the base residual (``test``): the chosen subset (``choose``), or unexplained if there is
     none, or if it leaves structure that a flexible model captures: the hybrid twin (validation RMS
-    ``flexible`` [N]) predicts the validation samples better. Where even the twin does no better, what is left
-    is no physics either model has (the chosen model's own error), and the subset is named.
+    ``flexible`` [N]) predicts the validation samples better by more than the structure test's tolerated
+    model error (``beyond_model_error``; noise std ``noise_std`` [N]). Where the twin does no better, what is
+    left is no physics either model has (the chosen model's own error), and the subset is named.
     No structure: nothing is named (contract v2.3), but the single term that
     beats the base model by the BIC margin under the noise model, if any, is said to be preferred by the
     information criterion alone and listed beside the base model (a model error a tenth of the noise, which
@@ -231,11 +234,12 @@ def _select(candidates: dict, s: DiagnosisSettings, test: StructureTest, flexibl
         corrected = candidates[chosen]
         if chosen and not corrected.leaves_structure(test):
             return _Selection(True, chosen, notes=notes)
-        if chosen and flexible is not None and flexible >= corrected.val_rmse:
+        if chosen and flexible is not None and not beyond_model_error(flexible, corrected.val_rmse, noise_std):
             notes.append(
                 f"{' + '.join(chosen)} leaves structure ({test.words(corrected.whiteness)}), but the hybrid twin "
-                f"predicts the validation samples no better ({flexible * 1e9:.3g} against "
-                f"{corrected.val_rmse * 1e9:.3g} nN): nothing else is left to explain"
+                f"predicts the validation samples no better than a model error of {MODEL_ERROR:g} noise std "
+                f"would ({flexible * 1e9:.3g} against {corrected.val_rmse * 1e9:.3g} nN): nothing else is left "
+                f"to explain"
             )
             return _Selection(True, chosen, notes=notes)
         if chosen:

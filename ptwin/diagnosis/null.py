@@ -122,6 +122,14 @@ def structure_test(
     )
 
 
+def beyond_model_error(flexible: float, model: float, noise_std: float) -> bool:
+    """A flexible model (validation RMS ``flexible`` [N]) predicts better than ``model`` by more than a model
+    error of ``MODEL_ERROR`` of the noise std ``noise_std`` [N] would: (model² − flexible²)/σ² > MODEL_ERROR².
+    The same tolerance as the structure test's: structure a flexible model captures only to that extent is
+    no physics either model left out."""
+    return (model**2 - flexible**2) / noise_std**2 > MODEL_ERROR**2
+
+
 def _draw(rng: np.random.Generator, size: int, noise: NoiseModel) -> np.ndarray:
     """(size, REPLICATES) unit-variance draws of white + AR(1) noise (share c, memory φ), stationary from
     the first sample (anti-correlated models are drawn white: κ² never goes below 1)."""
