@@ -25,7 +25,8 @@ import torch
 
 from ptwin.data.recordings import write_recordings
 from ptwin.diagnosis.words import bounded, number
-from ptwin.fitting.physics_fit import fit_physics
+from ptwin.fitting.lm import FitError
+from ptwin.fitting.physics_fit import fit_physics, fit_with_starts
 from ptwin.physics.model import total
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
@@ -47,7 +48,8 @@ class Trial:
     unexplained: bool
 
     def verdict(self, strength: str, native: float) -> str:
-        """What the diagnosis said of the term, in words; ``native``: the strength found as recorded."""
+        """What the diagnosis said of the term, in words; ``native``: the strength the recordings fit as they
+        are (``native_strength``)."""
         if not self.confidence:
             return "unexplained" if self.unexplained else "not named"
         found = bounded(self.found, self.interval, ".3g")
@@ -98,9 +100,9 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
     progress(f"inject: the recordings as they are ({len(inject.sizes) + 1} diagnoses in all)")
     as_recorded = run(settings, output_dir / "as-recorded", quiet)
     trials = [_trial(0.0, None, 0.0, as_recorded.diagnosis, inject.term, strength)]
-    native = trials[0].found if trials[0].confidence else 0.0
-    progress(f"  as recorded: {trials[0].verdict(strength, native)}")
     prepared = prepare(settings, quiet)
+    native = native_strength(prepared, inject.term, strength, settings.optim.physics_fit.iterations)
+    progress(f"  as recorded: {trials[0].verdict(strength, native)} ({strength} {native:.3g} fitted, named or not)")
     for i, size in enumerate(sorted(inject.sizes), start=1):
         params = inject.scaled(size)
         folder = output_dir / f"size-{size:g}"
@@ -111,7 +113,7 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
         verdict = trials[-1].verdict(strength, native)
         added = f"{strength} {params[strength]:.3g} added (peak {peak:.1f}× the noise)"
         progress(f"  [{i}/{len(inject.sizes)}] {added}: {verdict}")
-    section = detection_section(inject.term, strength, trials)
+    section = detection_section(inject.term, strength, trials, native)
     with (output_dir / "as-recorded" / "report.md").open("a") as report:
         report.write("\n" + "\n".join(section) + "\n")
     progress("\n".join(section[-1:]))
@@ -126,9 +128,20 @@ def _trial(size: float, added: float | None, peak: float, diagnosis: dict, term:
     return Trial(size, added, peak, entry["confidence"], value, interval, diagnosis["unexplained"])
 
 
-def detection_section(term: str, strength: str, trials: list[Trial]) -> list[str]:
-    """report.md's section: each size added, the verdict, and the smallest size named."""
-    native = trials[0].found if trials[0].confidence else 0.0
+def native_strength(prepared: Prepared, term: str, strength: str, iterations: int) -> float:
+    """The term's strength the recordings fit as they are, named or not (0 where its fit fails or is not
+    physical): what a size found is read against. Recordings hold some of any term's shape already (below
+    the naming threshold, or a model error it projects onto), and an added size adds to that."""
+    try:
+        fit = fit_with_starts(prepared.make_model, (term,), prepared.samples, prepared.split.train, iterations)
+    except FitError:
+        return 0.0
+    return fit.params[term][strength] if fit.physical else 0.0
+
+
+def detection_section(term: str, strength: str, trials: list[Trial], native: float) -> list[str]:
+    """report.md's section: each size added, the verdict (the size found over the recordings' own
+    ``native`` strength), and the smallest size named."""
     lines = [
         "## What these recordings could have shown",
         "",
