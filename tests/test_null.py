@@ -1,5 +1,7 @@
 """The structure test's null distribution: its false-alarm rate on noise alone is the one it states."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -70,3 +72,23 @@ def test_the_elastic_laws_own_noise_lifts_what_noise_alone_reads(tmp_path):
     # ν blocks of baseline behind κ²: a heavier tail, a higher threshold.
     measured = NoiseModel(3e-10, 0.0, 1.0, 0.0, "known", 0, blocks=8.0)
     assert structure_test(samples, index, law, measured, BLOCK, 0.01).threshold > 1.5 * shared.threshold
+
+
+def test_a_curve_whose_baseline_drifts_more_than_the_sets_is_judged_by_its_own_inflation(tmp_path):
+    # Real noise drifts more on some curves than on others: four curves of white noise and one whose noise is
+    # a slow AR(1) (κ² ≈ 15 at 50-sample blocks) throughout, baseline and contact alike. Judged by the set's
+    # pooled κ² (1.5 here), that curve's noise alone reads as structure; by its own baseline's, it does not.
+    rng = np.random.default_rng(5)
+    parts = [rng.standard_normal(1200) for _ in range(4)] + [correlated_noise(rng, 1200, 1.0, 0.9)]
+    meta, curves = simulate(Experiment(samples=1200, noise_std=0.0, z_start=-1.0e-6))
+    for curve, noise in zip(dict.fromkeys(curves["curve"]), parts):
+        curves.loc[curves["curve"] == curve, "force"] += 3e-10 * noise
+    write_recordings(tmp_path, meta, curves)
+    kinematics = curve_kinematics(load_recordings(tmp_path))
+    assert kinematics[-1].noise.inflation > 5.0  # measured on its own baseline
+    samples = Samples.from_curves(kinematics, noise_inflation=1.5)
+    index = torch.nonzero(samples.in_contact).squeeze(1)
+    noise = torch.from_numpy(3e-10 * np.concatenate(parts))[index]
+    as_the_set = replace(samples, curve_inflation=torch.full_like(samples.time, 1.5))
+    assert pooled_whiteness(as_the_set, noise, index, BLOCK) > 2.0  # its W ≈ 15 / 1.5 lifts the mean of five
+    assert pooled_whiteness(samples, noise, index, BLOCK) < 1.0

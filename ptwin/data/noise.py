@@ -25,7 +25,10 @@ Removing the line biases a short record's autocorrelation low (a 116-sample base
 20-sample correlation loses most of it), so (c, φ) are fitted to the *expected* sample
 autocorrelation of a detrended record of each length, computed exactly, and the set's
 correlation is fitted on every curve's baseline at once (``pooled``). Without a baseline
-σ comes from second differences, corrected for the set's correlation where it is known.
+σ comes from second differences, corrected for the set's correlation where it is known;
+a baseline too short for a model of its own (``MIN_RECORD`` to ``MIN_BASELINE`` samples) still
+adds its detrended record to the set's correlation (halving a set's sampling rate, or a
+third off its baselines, turned correlated-noise nulls white and into false alarms).
 A ``noise_std`` a lab wrote down replaces σ only: the correlation is still measured.
 
 ``blocks`` ν counts the independent block means κ² rests on (baseline samples / block):
@@ -42,8 +45,10 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
-MIN_BASELINE = 100  # samples of pre-contact baseline for a measured noise model
+MIN_BASELINE = 100  # samples of pre-contact baseline for a curve's own measured noise model
+MIN_RECORD = 30  # samples of a shorter baseline that still add to the set's pooled correlation
 BASELINE = "pre-contact baseline"
+SHORT_BASELINES = "pre-contact baselines, each shorter than 100 samples, pooled"
 SECOND_DIFFERENCES = "second differences of the curve (no baseline long enough)"
 _MEMORIES = np.exp(-1.0 / np.geomspace(0.3, 300.0, 48))  # φ grid: correlation times 0.3–300 samples
 _SHARES = np.linspace(-0.5, 1.0, 61)  # c grid (anti-correlated cell noise has c·φ < 0)
@@ -63,10 +68,11 @@ class NoiseModel:
     memory: float = 0.0  # φ: the AR(1) part's lag-1 correlation
     blocks: float = math.inf  # ν: independent block means the correlation rests on (inf: assumed white)
     record: np.ndarray | None = field(default=None, compare=False, repr=False)  # the detrended baseline [N]
+    short: np.ndarray | None = field(default=None, compare=False, repr=False)  # a baseline too short for a model
 
     def as_dict(self) -> dict:
         """Every number of the model (results.json), without the baseline record."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "record"}
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("record", "short")}
 
     def autocorrelation(self, lags: np.ndarray) -> np.ndarray:
         """ρ_k of the model at ``lags`` (ρ₀ = 1)."""
@@ -186,12 +192,17 @@ def baseline_noise(time: np.ndarray, z: np.ndarray, force: np.ndarray, block: in
     """
     if force.size < MIN_BASELINE:
         return None
-    design = np.column_stack([np.ones_like(z), z - z.mean()])
-    coefficients, *_ = np.linalg.lstsq(design, force, rcond=None)
-    noise = force - design @ coefficients
+    noise = _detrended(z, force)
     if not np.any(noise):
         return None
     return _from_records([noise], block, float(np.median(np.diff(time))), BASELINE)
+
+
+def _detrended(z: np.ndarray, force: np.ndarray) -> np.ndarray:
+    """The force with its least-squares line in z removed [N]."""
+    design = np.column_stack([np.ones_like(z), z - z.mean()])
+    coefficients, *_ = np.linalg.lstsq(design, force, rcond=None)
+    return force - design @ coefficients
 
 
 def second_difference_std(force: np.ndarray) -> float:
@@ -202,11 +213,13 @@ def second_difference_std(force: np.ndarray) -> float:
 
 def curve_noise(time, z, force, baseline: np.ndarray, block: int) -> NoiseModel:
     """The noise of one curve: measured on its ``baseline`` samples (bool mask) if long enough,
-    else σ from second differences of the whole curve, correlation unknown (white until pooled)."""
+    else σ from second differences of the whole curve, correlation unknown (white until pooled; a
+    baseline of ``MIN_RECORD`` samples or more is kept as a short record for the pool)."""
     measured = baseline_noise(time[baseline], z[baseline], force[baseline], block)
     if measured is not None:
         return measured
-    return NoiseModel(second_difference_std(force), 0.0, 1.0, 0.0, SECOND_DIFFERENCES, int(force.size))
+    short = _detrended(z[baseline], force[baseline]) if baseline.sum() >= MIN_RECORD else None
+    return NoiseModel(second_difference_std(force), 0.0, 1.0, 0.0, SECOND_DIFFERENCES, int(force.size), short=short)
 
 
 def with_std(model: NoiseModel, std: float, where: str) -> NoiseModel:
@@ -216,17 +229,24 @@ def with_std(model: NoiseModel, std: float, where: str) -> NoiseModel:
 
 def pooled(models: list[NoiseModel], weights: list[float], steps: list[float], block: int = 50) -> NoiseModel:
     """The set's noise: σ averaged with ``weights`` (fitted samples per curve); the correlation fitted on
-    every measured baseline at once (one instrument, one sample), else white. A curve whose σ came from
-    second differences has it corrected for that correlation: Var(Δ²e) = σ²(6 − 8ρ₁ + 2ρ₂)."""
+    every measured baseline at once (one instrument, one sample), short ones too where no curve has a long
+    one, else white. A curve whose σ came from second differences has it corrected for that correlation:
+    Var(Δ²e) = σ²(6 − 8ρ₁ + 2ρ₂)."""
     records = [m.record for m in models if m.record is not None]
+    source = models[0].source
+    if not records:
+        records, source = [m.short for m in models if m.short is not None], SHORT_BASELINES
     if not records:
         std = float(np.average([m.std for m in models], weights=weights))
         return NoiseModel(std, 0.0, 1.0, 0.0, SECOND_DIFFERENCES, sum(m.samples for m in models))
-    correlation = _from_records(records, block, float(np.median(steps)), models[0].source)
+    correlation = _from_records(records, block, float(np.median(steps)), source)
     rho1, rho2 = correlation.autocorrelation(np.array([1, 2]))
     factor = math.sqrt(6.0 / (6.0 - 8.0 * rho1 + 2.0 * rho2))
     stds = [m.std * factor if m.source == SECOND_DIFFERENCES else m.std for m in models]
     sources = {m.source for m in models if m.record is not None}
+    if not sources:  # short records only: say so, and where σ came from if not from them
+        given = {m.source.split(";")[0] for m in models if m.source.startswith("std from")}
+        sources = {f"{given.pop()}; correlation from the {SHORT_BASELINES}" if len(given) == 1 else SHORT_BASELINES}
     return replace(
         correlation,
         std=float(np.average(stds, weights=weights)),

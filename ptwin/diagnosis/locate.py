@@ -5,7 +5,8 @@ The whiteness statistic of a curve splits its residual (in noise units, time ord
 into blocks of ``block`` samples: for white noise each block mean has variance
 1/block, so W = mean(block · mean²) ≈ 1; structure that persists over a block
 inflates it by the block length. Correlated noise inflates it too, by κ² (the noise
-model's block-mean variance over the white expectation), so W is divided by κ². Noise alone
+model's block-mean variance over the white expectation), so W is divided by κ²: the set's, or a
+curve's own where its baseline measured more (``Samples.curve_inflation``). Noise alone
 still reads above 1 (the elastic law is read off a noisy curve); what it reads, and so the
 threshold, is ``ptwin.diagnosis.null``'s.
 """
@@ -51,9 +52,14 @@ def whiteness(scaled: torch.Tensor, block: int, inflation: float = 1.0) -> float
 def pooled_whiteness(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block: int) -> float:
     """W over the blocks of every curve (``residual`` in N, on ``index``, time-ordered), in units of the
     samples' noise model."""
-    scaled = [_curve_residual(samples, residual, index, i)[0] for i in range(len(samples.curve_ids))]
-    values = [whiteness(s, block, samples.noise_inflation) for s in scaled if s.numel()]
+    parts = [_curve_residual(samples, residual, index, i) for i in range(len(samples.curve_ids))]
+    values = [whiteness(scaled, block, _inflation(samples, where)) for scaled, where in parts if scaled.numel()]
     return sum(values) / len(values)
+
+
+def _inflation(samples: Samples, where: torch.Tensor) -> float:
+    """κ² of the curve of the samples ``where`` (its own where its baseline measured more than the set's)."""
+    return samples.curve_inflation[where[0]].item()
 
 
 def _curve_residual(samples, residual, index, curve):
@@ -72,11 +78,12 @@ def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block:
         scaled, where = _curve_residual(samples, residual, index, i)
         if scaled.numel() == 0:
             continue
-        w = whiteness(scaled, block, samples.noise_inflation)
+        inflation = _inflation(samples, where)
+        w = whiteness(scaled, block, inflation)
         if w <= test.curve_threshold(i):
             continue
         means, edges = block_means(scaled, block)
-        off = (means.abs() * torch.diff(edges).sqrt() > 3.0 * samples.noise_inflation**0.5).nonzero().squeeze(1)
+        off = (means.abs() * torch.diff(edges).sqrt() > 3.0 * inflation**0.5).nonzero().squeeze(1)
         if off.numel() == 0:
             continue
         lo, hi = edges[off.min()].item(), edges[off.max() + 1].item()

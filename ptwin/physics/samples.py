@@ -33,6 +33,7 @@ class Samples:
     segment: torch.Tensor | None = None  # long: 0 approach, 1 hold, 2 retract (None: all approach)
     nominal_speed: torch.Tensor | None = None  # the curve's approach speed [m/s] (None: base_speed)
     pins_contact: torch.Tensor | None = None  # bool: pre-contact samples that pin an estimated contact (None: none)
+    curve_inflation: torch.Tensor | None = None  # κ² of each sample's curve for the whiteness test (None: the set's)
 
     def __post_init__(self):
         if self.segment is None:
@@ -41,6 +42,8 @@ class Samples:
             self.nominal_speed = self.base_speed
         if self.pins_contact is None:
             self.pins_contact = torch.zeros_like(self.in_contact)
+        if self.curve_inflation is None:
+            self.curve_inflation = torch.full_like(self.time, self.noise_inflation)
 
     @property
     def fitted(self) -> torch.Tensor:
@@ -49,6 +52,10 @@ class Samples:
 
     @classmethod
     def from_curves(cls, curves: list[CurveKinematics], noise_inflation: float = 1.0) -> Samples:
+        """The curves' samples; ``noise_inflation``: the set's κ². A curve whose own baseline measured a
+        larger κ² (real noise drifts more on some curves than on others) keeps its own for the whiteness
+        test: the set's would read its correlated noise as structure."""
+
         def cat(values):
             return torch.from_numpy(np.concatenate(values))
 
@@ -68,6 +75,7 @@ class Samples:
             segment=cat([c.segment for c in curves]),
             nominal_speed=cat([np.full(len(c.time), c.base_speed) for c in curves]),
             pins_contact=cat([c.pins_contact for c in curves]),
+            curve_inflation=cat([np.full(len(c.time), max(noise_inflation, c.noise.inflation)) for c in curves]),
         )
 
     def join(self, other: Samples) -> Samples:
