@@ -13,9 +13,13 @@ diagnosis says). Grading, as the sets' README states it:
 and for ``none`` and ``terms`` the corrected K within 5 % of the truth (or the set's ``k_tol``).
 
 ``make discover-bench`` runs them after its own suites (``python -m bench.discover_bench --suite
-bench-sets [--only NAME ...]``: them alone). The sets are found beside the repository
-(``../shared/bench-sets``) or under ``$PTWIN_BENCH_SETS``; without them the suite says so in one
-line and is skipped.
+bench-sets [--only NAME ...]``: them alone). ``--suite perturbed`` runs each set again as another seed
+of its family might have recorded it: every other sample (half the sampling rate), a third of every
+baseline cut off, the fastest curve left out (where three or more remain): the sets are a development
+set, and a verdict that holds only on their exact samples would not hold on the judged ones.
+
+The sets are found beside the repository (``../shared/bench-sets``) or under ``$PTWIN_BENCH_SETS``;
+without them the suite says so in one line and is skipped.
 """
 
 from __future__ import annotations
@@ -25,10 +29,13 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
 import yaml
 from hydra import compose, initialize_config_dir
 
 from ptwin.app import typed
+from ptwin.data.recordings import Meta, write_recordings
 from ptwin.pipeline.run import run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,6 +54,9 @@ class Graded:
     seconds: float
     right: bool
     why: str  # what was wrong, empty when right
+
+    def line(self) -> str:
+        return f"{self.name}: {self.named} ({'right' if self.right else 'WRONG: ' + self.why}, {self.seconds:.1f} s)"
 
 
 def grade(truth: dict, d: dict) -> tuple[bool, str, float | None]:
@@ -92,38 +102,76 @@ def run_sets(overrides: list[str], scratch: Path, only: list[str] | None = None)
             continue
         truth = yaml.safe_load((folder / "truth.yaml").read_text())
         d, seconds = diagnose_set(folder, overrides, scratch)
-        right, why, k_error = grade(truth, d)
-        named = " + ".join(f"{e['term']} ({e['confidence']})" for e in d["left_out"]) or "-"
-        if d["unexplained"]:
-            named = f"unexplained{'' if named == '-' else ' [' + named + ']'}"
-        base, corrected = d["fit"]["base"]["test_rmse"], d["fit"]["corrected"]["test_rmse"]
-        null = truth["expect"]["kind"] == "none"
-        rows.append(
-            Graded(
-                name=folder.name,
-                hides=" + ".join(truth.get("effects") or {}) or "-",
-                named=named,
-                k_error=k_error,
-                rmse_gain=base / corrected if base and corrected else float("nan"),
-                null=null,
-                false_alarm=null and (d["mismatch"]["detected"] or bool(d["left_out"])),
-                seconds=seconds,
-                right=right,
-                why=why,
-            )
-        )
-        print(f"bench-sets: {folder.name}: {named} ({'right' if right else 'WRONG: ' + why}, {seconds:.1f} s)")
+        rows.append(graded(folder.name, truth, d, seconds))
+        print(f"bench-sets: {rows[-1].line()}")
     return rows
 
 
-def print_sets(rows: list[Graded]) -> None:
-    print("\nshared bench-sets (independent simulator, real noise where the set says so)")
-    print(f"{'set':<34s} {'concealed':<48s} {'named (confidence)':<52s} {'K %':>8s} {'gain':>6s} {'s':>5s}")
+def graded(name: str, truth: dict, d: dict, seconds: float) -> Graded:
+    """The row of one diagnosis ``d`` of a set whose truth is ``truth``."""
+    right, why, k_error = grade(truth, d)
+    named = " + ".join(f"{e['term']} ({e['confidence']})" for e in d["left_out"]) or "-"
+    if d["unexplained"]:
+        named = f"unexplained{'' if named == '-' else ' [' + named + ']'}"
+    base, corrected = d["fit"]["base"]["test_rmse"], d["fit"]["corrected"]["test_rmse"]
+    null = truth["expect"]["kind"] == "none"
+    return Graded(
+        name=name,
+        hides=" + ".join(truth.get("effects") or {}) or "-",
+        named=named,
+        k_error=k_error,
+        rmse_gain=base / corrected if base and corrected else float("nan"),
+        null=null,
+        false_alarm=null and (d["mismatch"]["detected"] or bool(d["left_out"])),
+        seconds=seconds,
+        right=right,
+        why=why,
+    )
+
+
+def perturbed(frame: pd.DataFrame, meta: dict):
+    """(name, curves) of the set ``frame`` as other recordings of its family might be (module docstring)."""
+    yield "every other sample", frame[frame.groupby("curve", sort=False).cumcount() % 2 == 0]
+    keep = np.ones(len(frame), dtype=bool)
+    for curve in frame["curve"].unique():
+        baseline = np.flatnonzero((frame["curve"] == curve).to_numpy() & (frame["z"] < 0).to_numpy())
+        keep[baseline[: baseline.size // 3]] = False
+    yield "a third of each baseline off", frame[keep]
+    speeds = frame.groupby("curve", sort=False)["base_speed"].max()
+    if speeds.size >= 4 and speeds.idxmax() != meta["reference_curve"]:
+        yield "fastest curve left out", frame[frame["curve"] != speeds.idxmax()]
+
+
+def run_perturbed(overrides: list[str], scratch: Path, only: list[str] | None = None) -> list[Graded] | None:
+    """Every set, perturbed each way of ``perturbed``, graded against its truth."""
+    if not SETS.is_dir():
+        print(f"bench-sets: {SETS} not found (set PTWIN_BENCH_SETS to the folder of the shared sets); skipped")
+        return None
+    rows = []
+    for folder in sorted(p for p in SETS.iterdir() if (p / "truth.yaml").is_file()):
+        if only and not any(word in folder.name for word in only):
+            continue
+        truth = yaml.safe_load((folder / "truth.yaml").read_text())
+        meta = yaml.safe_load((folder / "data" / "meta.yaml").read_text())
+        for how, frame in perturbed(pd.read_csv(folder / "data" / "curves.csv"), meta):
+            target = scratch / f"{folder.name}-{how.replace(' ', '-')}"  # a Hydra override's value: no commas
+            write_recordings(target / "data", Meta(**{k: v for k, v in meta.items() if k != "format"}), frame)
+            d, seconds = diagnose_set(target, overrides, scratch / "runs")
+            rows.append(graded(f"{folder.name}, {how}", truth, d, seconds))
+            print(f"perturbed: {rows[-1].line()}")
+    return rows
+
+
+def print_sets(rows: list[Graded], title: str = "shared bench-sets") -> None:
+    print(f"\n{title} (independent simulator, real noise where the set says so)")
+    width = max(34, *(len(r.name) for r in rows))
+    print(f"{'set':<{width}s} {'concealed':<48s} {'named (confidence)':<52s} {'K %':>8s} {'gain':>6s} {'s':>5s}")
     for r in rows:
         k = "   –" if r.k_error is None else f"{100 * r.k_error:8.2f}"
         verdict = "right" if r.right else f"WRONG ({r.why})"
         print(
-            f"{r.name:<34s} {r.hides:<48.48s} {r.named:<52.52s} {k:>8s} {r.rmse_gain:6.2f} {r.seconds:5.1f} {verdict}"
+            f"{r.name:<{width}s} {r.hides:<48.48s} {r.named:<52.52s} {k:>8s} {r.rmse_gain:6.2f} {r.seconds:5.1f} "
+            f"{verdict}"
         )
     nulls = [r for r in rows if r.null]
     print(f"{sum(r.right for r in rows)}/{len(rows)} sets right")

@@ -40,7 +40,7 @@ from pathlib import Path
 
 from hydra import compose, initialize_config_dir
 
-from bench.bench_sets import print_sets, run_sets
+from bench.bench_sets import print_sets, run_perturbed, run_sets
 from ptwin.app import register, typed
 from ptwin.data.recordings import write_recordings
 from ptwin.pipeline.run import run
@@ -271,7 +271,7 @@ def print_loop(rows: list[tuple]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--suite", choices=[*SUITES, "bench-sets", "all"], default="all")
+    parser.add_argument("--suite", choices=[*SUITES, "bench-sets", "perturbed", "all"], default="all")
     parser.add_argument("--samples", type=int, default=1000, help="samples per curve (where not set by rate)")
     parser.add_argument("--pgd", default="default", help="PGD preset")
     parser.add_argument("--only", nargs="*", help="run only the cases whose name contains one of these")
@@ -308,6 +308,11 @@ def main() -> None:
             shared = run_sets(overrides, Path(scratch), args.only)
         if shared:
             print_sets(shared)
+    if args.suite == "perturbed":  # not in "all": a robustness check of ~35 diagnoses
+        with tempfile.TemporaryDirectory() as scratch:
+            shaken = run_perturbed([*overrides, "diagnosis.design=false"], Path(scratch), args.only)
+        if shaken:
+            print_sets(shaken, "shared bench-sets, perturbed")
 
 
 if __name__ == "__main__":
