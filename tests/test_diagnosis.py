@@ -218,3 +218,24 @@ def test_a_proposed_speed_is_one_a_person_sets():
 
     assert _round_down(59.7708e-6) == pytest.approx(59e-6)
     assert _round_down(45e-6) == pytest.approx(45e-6)
+
+
+@pytest.mark.parametrize(("ratio", "warned"), [(1.1, False), (5.3, True)])
+def test_no_structure_is_said_as_what_the_test_found_not_as_a_model_that_fits(ratio, warned):
+    # A real ramp-and-hold set at half its sampling rate: validation RMS 5.3× the noise std, yet no structure
+    # beyond its null (few baseline blocks, the law's end noise over every hold). That is no model that fits.
+    from types import SimpleNamespace
+
+    from ptwin.diagnosis.words import summarise
+
+    d = SimpleNamespace(
+        detected=False,
+        fit={"base": {"val_rmse": ratio * 1e-10}},
+        noise_floor=1e-10,
+        whiteness={"base": 2.0},
+        confounded=[],
+        permeability={"corrected": 2e-16, "corrected_interval": [1.9e-16, 2.1e-16]},
+    )
+    sentence = summarise(d, None, ABOVE_FIVE)
+    assert "explains every curve" not in sentence and f"validation RMS {ratio:.2f}× the noise std" in sentence
+    assert ("cannot tell from what their noise could leave" in sentence) == warned

@@ -10,6 +10,7 @@ import math
 
 MICRO = 1e6
 MATERIAL = 0.02  # a relative difference in K worth saying that K is not fixed
+UNRESOLVED = 2.0  # a validation RMS (× the noise std) worth a sentence where no structure is found
 
 
 def finite_or_none(value):
@@ -59,10 +60,17 @@ def summarise(d, apparent, test) -> str:
 def _findings(d, apparent, test) -> str:
     ratio = d.fit["base"]["val_rmse"] / d.noise_floor
     if not d.detected:
-        sentence = (
-            f"The base model explains every curve to the noise (validation RMS {ratio:.2f}× the noise std; "
-            f"{test.words(d.whiteness['base'])})."
-        )
+        # What the test found, not that the model is right: a misfit the test's null (the elastic law's own
+        # noise, few baseline blocks) cannot tell from noise may still be several noise std.
+        found = test.words(d.whiteness["base"])
+        sentence = f"No structure in the base model's residual beyond what noise alone leaves ({found}; "
+        sentence += f"validation RMS {ratio:.2f}× the noise std)."
+        if ratio > UNRESOLVED:
+            sentence += (
+                " A misfit that large which the test cannot call structure is one these recordings cannot tell from "
+                "what their noise could leave: the test rests on a few baseline blocks and on the noise of the one "
+                "curve the elastic law is read off; longer baselines and a longer reference curve would sharpen it."
+            )
         return sentence + _permeability_not_fixed(d) + _to_tell_apart(d.confounded)
     sentence = _where(d, ratio, test) + _trend(apparent)
     if d.unexplained:
