@@ -26,6 +26,7 @@ from ptwin.physics.terms import VOCABULARY
 # 1000× below the unit a Δχ² is read in (an interval's 3.84, the information criterion's margin of 10),
 # where LM spent ~40% of its steps.
 SETTLED = 0.5e-3
+LAW_FALL = 0.05  # of the reference's largest force: more fall of the elastic law than its reading explains
 
 
 @dataclass
@@ -120,6 +121,12 @@ def fit_physics(
                 found[name] = reason
         if term.implausible():
             implausible[name] = term.implausible()
+    fall = model.law_fall() if model.terms else 0.0
+    if fall > _tolerated_fall(model.reference):
+        for name in model.terms:
+            violations.setdefault(
+                name, f"the elastic law it implies falls by {fall * 1e9:.3g} nN as the depth grows (no solid does)"
+            )
     return PhysicsFit(
         terms=tuple(model.terms),
         permeability=permeability,
@@ -137,6 +144,15 @@ def fit_physics(
         degenerate=degenerate,
         implausible=implausible,
     )
+
+
+def _tolerated_fall(reference) -> float:
+    """How much an elastic law may fall with depth [N] before it is no solid's: the reference's noise, or
+    ``LAW_FALL`` of its largest force where that is more. Near an estimated contact the law is read off a
+    few noisy samples whose contact is uncertain, and a viscous force (∝ √w) outgrows the elastic one
+    (∝ w^1.5) there: a right model's law may dip by a few noise std at the first nodes (3.4 σ on a soft
+    set with viscosity), while a law that tracks the noise falls by a good part of the force range."""
+    return max(reference.noise_std, LAW_FALL * float(reference.reference_force.max()))
 
 
 def _without_effect(model: ForceModel, name: str, samples: Samples, index: torch.Tensor) -> str | None:

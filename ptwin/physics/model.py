@@ -156,6 +156,16 @@ class ForceModel(nn.Module):
         index, t = self.reference.bracket(depth)
         return self.elastic_nodes(permeability, index) * (1 - t) + self.elastic_nodes(permeability, index + 1) * t
 
+    def law_fall(self) -> float:
+        """The most the elastic law F_el falls anywhere as the depth grows [N] (0 for a monotone law). A solid
+        pushes back more, not less, the deeper it is pressed: a law that falls is no solid, however well it
+        fits. It also fits what it should not: with w = z − F/k_s read off the measured force, a law of
+        slope s near −k_s makes the model follow the force noise itself (the residual's noise is
+        −n·(1 + s/k_s)), which soft cantilevers allow."""
+        with torch.no_grad():
+            law = self.elastic_nodes()
+            return float((torch.cummax(law, 0).values - law).max())
+
     def hertz_modulus(self) -> float:
         """E* [Pa] of the Hertz law F = 4/3·E*·√ρ·w^1.5 closest (least squares) to this model's elastic law."""
         with torch.no_grad():
