@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ptwin.data.contact import estimate_baseline
+from ptwin.data.contact import estimate_baseline, levels_with_speed
 from ptwin.synth.presets import SOFT_CANTILEVER
 from ptwin.synth.simulator import Experiment, simulate
 
@@ -24,3 +24,20 @@ def test_contact_offset_and_tilt_are_found(spring_constant, tilt):
     assert baseline.offset == pytest.approx(3e-10 * offset + tilt * (baseline.contact_z - 2e-7 * error), abs=1e-11)
     travel, corrected = baseline.remove(z, force)
     assert np.abs(corrected[travel < -0.3e-6]).mean() < 2e-11  # the baseline is gone: noise is left
+
+
+def test_levels_are_kept_as_drag_only_where_they_rise_with_speed_beyond_free_offsets():
+    # Five curves, levels σ = 0.2 nN apart from their line. Free offsets of 1 nN's spread, drawn 2000 times: how
+    # often they pass for drag (one level plus b·speed within χ², b beyond t(3)'s 99%) is the stated 1% at most;
+    # most draws that lie on some line are told from drag by their scatter about it. A real drag of 1e-4 N s/m
+    # at these speeds (0.5–80 µm/s: 8 nN across them) is kept unless its levels fail χ² (1% of the time).
+    speeds = np.array([0.5, 2.0, 8.0, 40.0, 80.0]) * 1e-6
+    stds = np.full(5, 2e-10)
+    rng = np.random.default_rng(3)
+    offsets = [levels_with_speed(1e-9 * rng.standard_normal(5), stds, speeds) for _ in range(2000)]
+    assert np.mean([fit.consistent for fit in offsets]) > 0.005  # some random offsets do lie on a line ...
+    assert np.mean([fit.shows_drag for fit in offsets]) <= 0.012  # ... but do not rise beyond their scatter
+    drags = [
+        levels_with_speed(3e-10 + 1e-4 * speeds + 2e-10 * rng.standard_normal(5), stds, speeds) for _ in range(200)
+    ]
+    assert np.mean([fit.shows_drag for fit in drags]) >= 0.97

@@ -112,6 +112,19 @@ class LevelsWithSpeed:
         """The levels are one level plus drag: χ² within the model's (1 − ``REJECT``) quantile."""
         return self.chi_square <= scipy.stats.chi2.ppf(1.0 - REJECT, self.dof)
 
+    @property
+    def rise(self) -> float:
+        """b over its standard error, that scaled by the levels' scatter about the line where it exceeds their
+        standard errors (√(χ²/dof)): under levels that do not rise with speed, Student's t on ``dof``."""
+        return self.drag / (self.drag_std * max(1.0, self.chi_square / self.dof) ** 0.5)
+
+    @property
+    def shows_drag(self) -> bool:
+        """The levels are one level plus drag, and they rise with speed beyond what free per-curve offsets of
+        their scatter would, one time in 1/``REJECT``: only then is the drag kept in the force. Levels that
+        merely do not contradict a line (five random offsets that happen to order with speed) are offsets."""
+        return self.consistent and self.rise > scipy.stats.t.ppf(1.0 - REJECT, self.dof)
+
 
 def levels_with_speed(levels: np.ndarray, stds: np.ndarray, speeds: np.ndarray) -> LevelsWithSpeed | None:
     """The weighted fit of o_i = a + b·v_i, or None when it cannot be told from free per-curve levels: fewer

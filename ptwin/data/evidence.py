@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ptwin.data.contact import levels_with_speed
+from ptwin.data.contact import REJECT, levels_with_speed
 from ptwin.data.kinematics import CurveKinematics
 from ptwin.data.recordings import APPROACH
 
@@ -82,7 +82,14 @@ def drag_from_baselines(curves: list[CurveKinematics]) -> str | None:
             f"Baseline levels {listing}: too few curves and speeds (four curves at three speeds at least) to tell one "
             "level plus drag (b·speed) from free per-curve offsets; each curve's own level is removed, drag with it."
         )
-    if fit.consistent:
+    if fit.consistent and not fit.shows_drag:
+        return (
+            f"Baseline levels {listing} are one common level plus {fit.drag:.2g} ± {fit.drag_std:.1g} N s/m × speed "
+            f"(χ² {fit.chi_square:.1f} on {fit.dof} degrees of freedom), but they rise with speed no more than free "
+            f"per-curve offsets of their scatter would one time in {1 / REJECT:.0f} (t = {fit.rise:.1f}): each "
+            "curve's own level is removed, drag with it."
+        )
+    if fit.shows_drag:
         return (
             f"Baseline levels {listing} are one common level plus {fit.drag:.2g} ± {fit.drag_std:.1g} N s/m × speed "
             f"(χ² {fit.chi_square:.1f} on {fit.dof} degrees of freedom): only the common level is removed, so drag "

@@ -184,8 +184,9 @@ def _segment_codes(rows: pd.DataFrame) -> np.ndarray:
 
 
 def _estimated_baselines(recordings: RecordingSet, rows: dict[str, pd.DataFrame]) -> dict[str, Baseline]:
-    """Each curve's estimated contact and baseline; where the levels are one common level plus drag
-    (``levels_with_speed``), only the common level is removed, so the drag stays in the force."""
+    """Each curve's estimated contact and baseline; where the levels are one common level plus drag that
+    rises with speed beyond their scatter (``LevelsWithSpeed.shows_drag``), only the common level is removed,
+    so the drag stays in the force."""
     baselines, speeds = {}, []
     for curve_id, curve in rows.items():
         approach = _segment_codes(curve) == APPROACH
@@ -195,7 +196,7 @@ def _estimated_baselines(recordings: RecordingSet, rows: dict[str, pd.DataFrame]
     levels = np.array([b.level for b in baselines.values()])
     stds = np.array([b.level_std for b in baselines.values()])
     fit = levels_with_speed(levels, stds, np.array(speeds))
-    if fit is None or not fit.consistent:
+    if fit is None or not fit.shows_drag:
         return baselines
     return {curve_id: b.with_offset(fit.common) for curve_id, b in baselines.items()}
 

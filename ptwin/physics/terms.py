@@ -264,10 +264,11 @@ class CantileverDrag(Term):
 
     name = "cantilever_drag"
     PARAMS = {"b": Parameter("N s/m", 0.0, minimum=0.0, plausible=(0.0, 1e-2))}
+    TYPICAL = {"b": 1.0e-4}
     TELL_APART = "the approach before contact at each speed (drag offsets the baseline)"
     WITH_ESTIMATED_CONTACT = (
-        "the curves' baseline levels differ by more than one common level plus drag would (or too few speeds "
-        "to tell), so each curve's own level is removed, drag with it"
+        "the curves' baseline levels are not one common level plus a drag that rises with speed beyond their "
+        "scatter (or too few speeds to tell), so each curve's own level is removed, drag with it"
     )
     KEPT_BY_COMMON_LEVEL = True
 
