@@ -186,9 +186,25 @@ def test_structure_left_is_unexplained_only_where_the_hybrid_twin_predicts_bette
         (): candidate((), 2000.0, 1.0e-9, whiteness=50.0),
         ("a",): candidate(("a",), 1000.0, 0.5e-9, whiteness=8.0),  # above the test's 5: structure left
     }
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, twin_rmse, 1.0e-9)
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, twin_rmse, 1.0e-9, {})
     assert pick.structured and pick.chosen == named and pick.unexplained == (not named)
-    assert _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9).unexplained  # no witness
+    assert _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}).unexplained  # no witness
+
+
+def test_a_residual_within_the_noise_as_a_whole_names_a_term_it_is_not_noise_in_the_shape_of():
+    # W passes (1 < 5), but term a takes 120 units of χ² off where noise and tolerated model error give 40: named.
+    # At 30 it is not: the information criterion alone (ΔBIC 690) only lists it beside the base model.
+    from ptwin.diagnosis.diagnose import DiagnosisSettings, _select
+    from ptwin.diagnosis.null import TermEvidence
+
+    candidates = {(): candidate((), 2000.0, 1.0e-9), ("a",): candidate(("a",), 1000.0, 0.7e-9)}
+    beyond = {"a": TermEvidence("a", 120.0, 40.0, 3.0, 0.005)}
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, beyond)
+    assert pick.detected and not pick.structured and pick.chosen == ("a",)
+    assert "in the shape of a it is not" in pick.notes[-1]
+    within = {"a": TermEvidence("a", 30.0, 40.0, 3.0, 0.005)}
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, within)
+    assert not pick.detected and pick.preferred == ("a",)
 
 
 def test_an_experiment_two_groups_share_is_said_once():

@@ -92,3 +92,45 @@ def test_a_curve_whose_baseline_drifts_more_than_the_sets_is_judged_by_its_own_i
     as_the_set = replace(samples, curve_inflation=torch.full_like(samples.time, 1.5))
     assert pooled_whiteness(as_the_set, noise, index, BLOCK) > 2.0  # its W ≈ 15 / 1.5 lifts the mean of five
     assert pooled_whiteness(samples, noise, index, BLOCK) < 1.0
+
+
+def _term_draws(test, shape, noise_draws, error=None):
+    """TermEvidence of a one-parameter term of ``shape`` (noise units) fitted by least squares to each column of
+    ``noise_draws`` (+ a model error ``error``), the smaller model being zero."""
+    from ptwin.diagnosis.null import term_evidence
+
+    residuals = noise_draws if error is None else noise_draws + error[:, None]
+    gains = (shape @ residuals) ** 2 / (shape @ shape)
+    totals = np.sum(residuals**2, axis=0)
+    n = shape.size
+    return [term_evidence(test, shape, (t, t - g), n, 1, "term", 0.1) for t, g in zip(totals, gains)]
+
+
+def test_a_terms_gain_on_noise_alone_is_chi_square_whatever_the_correlation():
+    # AR(1) noise of 5-sample memory (κ² ≈ 5 along a smooth shape): the gain a smooth term takes off noise alone,
+    # over λ along its shape, is χ²(1): mean 1, exceeded by 2.71 one time in ten. Without λ it would be ~5× that.
+    share, memory = 0.6, np.exp(-1 / 5)
+    inflation = max(1.0, model_inflation(share, memory, BLOCK))
+    noise = NoiseModel(2e-10, share * memory, inflation, 0.0, "known", 0, share, memory)
+    samples = flat_samples(3, 1000, 2e-10, inflation)
+    test = structure_test(samples, torch.arange(3000), None, noise, BLOCK, 0.1)
+    shape = np.sqrt(samples.depth.numpy() / 1e-6) * (1.0 + samples.curve.numpy())  # grows with depth and speed
+    rng = np.random.default_rng(11)
+    draws = np.stack(
+        [
+            np.sqrt(1 - share) * rng.standard_normal(3000) + np.sqrt(share) * correlated_noise(rng, 3000, 1.0, memory)
+            for _ in range(800)
+        ],
+        axis=1,
+    )
+    evidence = _term_draws(test, shape, draws)
+    gains = np.array([e.gain for e in evidence])
+    assert evidence[0].inflation == pytest.approx(1 + 2 * share * memory / (1 - memory), rel=0.2)
+    assert gains.mean() == pytest.approx(1.0, abs=0.15)  # sd of the mean of 800 χ²(1): 0.05
+    assert np.mean(gains > 2.706) == pytest.approx(0.1, abs=0.035)
+    # Beyond noise and model error: never on noise alone, nor with a model error of the tolerated size shaped
+    # exactly like the term (the worst case); always for a term three times that size.
+    assert not any(e.beyond for e in evidence)
+    tolerated = MODEL_ERROR * shape / np.sqrt(np.mean(shape**2))
+    assert np.mean([e.beyond for e in _term_draws(test, shape, draws, tolerated)]) <= 0.1
+    assert all(e.beyond for e in _term_draws(test, shape, draws, 3 * tolerated))

@@ -15,7 +15,14 @@ from ptwin.diagnosis.design import MAX_REPEATS, ExperimentDesign, Prediction
 from ptwin.diagnosis.intervals import profile_interval, within
 from ptwin.diagnosis.locate import Mismatch, locate
 from ptwin.diagnosis.name import Candidate, choose, confounded, fit_candidates, rejected
-from ptwin.diagnosis.null import MODEL_ERROR, StructureTest, beyond_model_error, structure_test
+from ptwin.diagnosis.null import (
+    MODEL_ERROR,
+    StructureTest,
+    TermEvidence,
+    beyond_model_error,
+    structure_test,
+    term_evidence,
+)
 from ptwin.diagnosis.words import MATERIAL, finite_or_none, summarise
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import rmse_of
@@ -77,6 +84,7 @@ class Diagnosis:
     permeability: dict  # base, corrected, corrected_std, corrected_interval [m²]
     notes: list[str] = field(default_factory=list)
     predictions: list[Prediction] = field(default_factory=list)  # of each proposed next experiment
+    evidence: dict[str, TermEvidence] = field(default_factory=dict)  # of each single term over the base model
 
     @property
     def base(self) -> Candidate:
@@ -155,7 +163,8 @@ def diagnose(
     )
     base = candidates[()]
     twin = _twin_rmse(hybrid, samples, split)
-    pick = _select(candidates, s, test, twin["val_rmse"], noise.std)
+    evidence = _shape_evidence(candidates, samples, seen, test, s.false_alarm)
+    pick = _select(candidates, s, test, twin["val_rmse"], noise.std, evidence)
     with torch.no_grad():
         base_residual = base.fit.model(samples)[seen] - samples.force[seen]
     where = locate(samples, base_residual, seen, s.block, test) if pick.structured else []
@@ -196,6 +205,7 @@ def diagnose(
         permeability=_permeability(context, [candidates[t] for t in rivals], pick.unexplained),
         notes=notes,
         predictions=predictions,
+        evidence=evidence,
     )
     diagnosis.summary = summarise(diagnosis, apparent, test)
     return diagnosis
@@ -216,18 +226,51 @@ class _Selection:
         return self.structured or bool(self.chosen)
 
 
+def _shape_evidence(candidates: dict, samples: Samples, seen: torch.Tensor, test: StructureTest, false_alarm: float):
+    """``TermEvidence`` of each usable single term over the base model, each test at ``false_alarm`` over the
+    number of terms tried (so that any of them reads noise as a term at most that often)."""
+    base = candidates[()].fit
+    singles = {t: c for t, c in candidates.items() if len(t) == 1}
+    with torch.no_grad():
+        before = base.model(samples)[seen]
+        sigma = samples.noise_floor[seen]
+        evidence = {}
+        for (term,), c in singles.items():
+            if not c.usable:
+                continue
+            shape = ((c.fit.model(samples)[seen] - before) / sigma).cpu().numpy()
+            evidence[term] = term_evidence(
+                test,
+                shape,
+                (base.chi_square, c.fit.chi_square),
+                c.fit.samples,
+                c.fit.parameter_count - base.parameter_count,
+                term,
+                false_alarm / max(len(singles), 1),
+            )
+    return evidence
+
+
 def _select(
-    candidates: dict, s: DiagnosisSettings, test: StructureTest, flexible: float | None, noise_std: float
+    candidates: dict,
+    s: DiagnosisSettings,
+    test: StructureTest,
+    flexible: float | None,
+    noise_std: float,
+    evidence: dict[str, TermEvidence],
 ) -> _Selection:
     """Structure in the base residual (``test``): the chosen subset (``choose``), or unexplained if there is
     none, or if it leaves structure that a flexible model captures: the hybrid twin (validation RMS
     ``flexible`` [N]) predicts the validation samples better by more than the structure test's tolerated
     model error (``beyond_model_error``; noise std ``noise_std`` [N]). Where the twin does no better, what is
     left is no physics either model has (the chosen model's own error), and the subset is named.
-    No structure: nothing is named (contract v2.3), but the single term that
-    beats the base model by the BIC margin under the noise model, if any, is said to be preferred by the
-    information criterion alone and listed beside the base model (a model error a tenth of the noise, which
-    real data always have, earns such a margin over thousands of samples)."""
+    No structure in the residual as a whole: a term is still named where the residual is not noise in its own
+    shape (``evidence``, ``null.TermEvidence``: beyond what noise and a model error of ``MODEL_ERROR`` give
+    it; a test of one shape is far more powerful than a test of all of them), if the selection keeps it.
+    Otherwise nothing is named (contract v2.3), but the single term that beats the base model by the BIC
+    margin under the noise model, if any, is said to be preferred by the information criterion alone and
+    listed beside the base model (a model error a tenth of the noise, which real data always have, earns
+    such a margin over thousands of samples)."""
     base = candidates[()]
     if base.leaves_structure(test):
         chosen, notes = choose(candidates, s.bic_margin, s.heldout_margin)
@@ -248,13 +291,22 @@ def _select(
                 f"({test.words(corrected.whiteness)}): not claimed"
             )
         return _Selection(True, unexplained=True, notes=notes)
+    if any(e.beyond for e in evidence.values()):
+        chosen, notes = choose({t: c for t, c in candidates.items() if len(t) <= 1}, s.bic_margin, s.heldout_margin)
+        if chosen and evidence[chosen[0]].beyond:
+            notes.append(
+                f"The residual as a whole is within the noise ({test.words(base.whiteness)}), but in the shape of "
+                f"{chosen[0]} it is not: {evidence[chosen[0]].words()}"
+            )
+            return _Selection(False, chosen, notes=notes)
     better = [c for t, c in candidates.items() if len(t) == 1 and c.usable and base.fit.bic - c.fit.bic >= s.bic_margin]
     if not better:
         return _Selection(False)
     best = min(better, key=lambda c: c.fit.bic)
     why = (
         f"{best.terms[0]} lowers the BIC by {base.fit.bic - best.fit.bic:.0f}, but the base model's residual is "
-        f"within the noise ({test.words(base.whiteness)}): not named, listed beside the base model"
+        f"within the noise ({test.words(base.whiteness)}), and {evidence[best.terms[0]].words()}: not named, "
+        "listed beside the base model"
     )
     return _Selection(False, preferred=best.terms, notes=[why])
 

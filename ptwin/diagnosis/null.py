@@ -30,7 +30,7 @@ calling noise noise) and the isotonic step of the law (it only irons out wiggles
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.signal
@@ -66,12 +66,16 @@ class ScaledF:
 
 @dataclass(frozen=True)
 class StructureTest:
-    """W on noise alone, pooled over the curves and per curve (by index into ``samples.curve_ids``)."""
+    """W on noise alone, pooled over the curves and per curve (by index into ``samples.curve_ids``), and the
+    simulated residuals themselves (noise units, on the tested samples), which say how much any one shape
+    of misfit the noise alone can fake (``inflation_along``)."""
 
     whiteness: ScaledF
     curves: dict[int, ScaledF]
     false_alarm: float
     tolerated: float  # W a model error of MODEL_ERROR adds: block · e² / κ²
+    draws: np.ndarray = field(compare=False, repr=False)  # (tested samples, REPLICATES)
+    noise_blocks: float = math.inf  # ν: independent block means the noise model's correlation rests on
 
     @property
     def threshold(self) -> float:
@@ -83,6 +87,15 @@ class StructureTest:
 
     def structured(self, whiteness: float) -> bool:
         return whiteness > self.threshold
+
+    def inflation_along(self, shape: np.ndarray) -> float:
+        """λ ≥ 1: the variance of the noise alone projected on ``shape`` (noise units, on the tested samples),
+        over white noise's: correlation and the reference's noise carried by the elastic law make a smooth
+        shape λ times easier to fake than white noise would."""
+        norm = float(shape @ shape)
+        if norm <= 0.0:
+            return 1.0
+        return max(1.0, float(np.mean((shape @ self.draws) ** 2)) / norm)
 
     def words(self, whiteness: float) -> str:
         """The statistic against its threshold, in words."""
@@ -119,6 +132,8 @@ def structure_test(
         {int(c): ScaledF.of(w, noise.blocks) for c, w in per_curve.items()},
         false_alarm,
         block * MODEL_ERROR**2 / samples.noise_inflation,
+        residual,
+        noise.blocks,
     )
 
 
@@ -152,3 +167,61 @@ def _whiteness(scaled: np.ndarray, block: int) -> np.ndarray:
     sums = np.add.reduceat(scaled, edges[:-1], axis=0)
     lengths = np.diff(edges)[:, None]
     return np.mean(sums**2 / lengths, axis=0)
+
+
+@dataclass(frozen=True)
+class TermEvidence:
+    """What one term gains over a smaller model, against what noise and model error could give it.
+
+    The gain is Δχ² (noise units, on the fitted samples) over λ·s²: λ the inflation of the noise along the
+    shape the term adds (``StructureTest.inflation_along``), s² the larger model's mean square residual (at
+    least 1: in contact a soft cantilever's noise exceeds the baseline's). Under the smaller model with its
+    noise, that is χ²(p) for the term's p parameters, F(p, ν)·p where the correlation rests on ν baseline
+    blocks. A model error of ``MODEL_ERROR`` σ on each of the N samples, shaped like the term at worst, adds
+    at most N·e²/(λ s²) in its root: the gain is beyond both when it exceeds
+
+        (√(N e²/(λ s²)) + √q)²,   q the (1 − α) quantile of the noise part,
+
+    which holds whatever the model error's shape (Cauchy–Schwarz), so the false-alarm rate is at most α.
+    A term's specific shape is a far more powerful test than the whiteness of the whole residual, which
+    has to guard against every shape at once."""
+
+    term: str
+    gain: float  # Δχ² / (λ s²)
+    threshold: float
+    inflation: float  # λ
+    false_alarm: float  # α of this one test
+
+    @property
+    def beyond(self) -> bool:
+        return self.gain > self.threshold
+
+    def words(self) -> str:
+        return (
+            f"{self.term} takes {self.gain:.0f} units of χ² off the residual under the noise model, where noise "
+            f"and a model error of {MODEL_ERROR:g} noise std give at most {self.threshold:.0f} one time in "
+            f"{1 / self.false_alarm:.0f}"
+        )
+
+
+def term_evidence(
+    test: StructureTest,
+    shape: np.ndarray,
+    chi_square: tuple[float, float],
+    samples: int,
+    parameters: int,
+    term: str,
+    false_alarm: float,
+) -> TermEvidence:
+    """The ``TermEvidence`` of ``term``: ``shape`` is what it adds to the smaller model's forces on the
+    tested samples of ``test`` (noise units), ``chi_square`` the smaller and the larger model's χ² on their
+    ``samples`` fitted samples, ``parameters`` the term's, ``false_alarm`` this test's α."""
+    smaller, larger = chi_square
+    inflation = test.inflation_along(shape)
+    scale = inflation * max(1.0, larger / samples)
+    if math.isinf(test.noise_blocks):
+        quantile = scipy.stats.chi2.ppf(1.0 - false_alarm, parameters)
+    else:
+        quantile = parameters * scipy.stats.f.ppf(1.0 - false_alarm, parameters, test.noise_blocks)
+    threshold = (math.sqrt(samples * MODEL_ERROR**2 / scale) + math.sqrt(quantile)) ** 2
+    return TermEvidence(term, (smaller - larger) / scale, threshold, inflation, false_alarm)

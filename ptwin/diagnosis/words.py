@@ -135,6 +135,14 @@ def _record(group: dict) -> str:
 
 
 def _where(d, ratio: float, test) -> str:
+    if not test.structured(d.whiteness["base"]):  # named by a term's own shape (``null.TermEvidence``)
+        shaped = [d.evidence[e["term"]] for e in d.left_out if e["term"] in d.evidence]
+        return (
+            f"The base model misses the curves by {ratio:.1f}× the noise std. The residual as a whole passes for "
+            f"noise ({test.words(d.whiteness['base'])}), but not in the shape of one term: "
+            + "; ".join(e.words() for e in shaped)
+            + ". "
+        )
     if not d.where:
         return (
             f"The base model misses the curves by {ratio:.1f}× the noise std, in structure rather than noise "
