@@ -9,7 +9,7 @@ from hydra import compose, initialize_config_dir
 
 from ptwin.app import register, typed
 from ptwin.data.recordings import load_recordings
-from ptwin.pipeline.inject import added_force, detection
+from ptwin.pipeline.inject import added_force, detection, detection_limits
 from ptwin.pipeline.prepare import prepare
 from tests.conftest import CONFIGS, simulated_set
 
@@ -68,3 +68,40 @@ def test_values_that_do_not_match_the_terms_parameters_are_refused_in_one_line()
     assert InjectSettings("solid_relaxation", [0.2, 0.1]).scaled(2.0) == {"g": 0.4, "tau": 0.1}
     with pytest.raises(ValueError, match=r"inject.values of solid_relaxation are its parameters in the order"):
         InjectSettings("solid_relaxation", [5.0])
+
+
+def test_each_terms_sizes_are_read_off_its_added_force_weak_to_strong(tmp_path, coarse_cache):
+    # The ladder's sizes reach the peaks asked for (interpolated on a grid of the added force), the pore term's by
+    # a smaller M (its strength grows as M falls).
+    from ptwin.fitting.physics_fit import fit_physics
+    from ptwin.pipeline.inject import LADDER, _ladder
+
+    settings = inject_settings(simulated_set(tmp_path / "set"), coarse_cache)
+    prepared = prepare(settings, progress=lambda _: None)
+    base = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+    for term in ("solid_viscosity", "pore_pressure_relaxation"):
+        ladder = _ladder(prepared, term, base)
+        strength = next(iter(ladder[0][1]))
+        values = [params[strength] for _, params in ladder]
+        for peak, params in ladder:
+            added = added_force(prepared, term, params, base)
+            shown = max(np.abs(force).max() for force in added.values()) / prepared.noise.std
+            assert shown == pytest.approx(peak, rel=0.15)
+        assert values == sorted(values, reverse=term == "pore_pressure_relaxation")
+        assert [p for p, _ in ladder] == list(LADDER[: len(ladder)])
+
+
+@pytest.mark.slow
+def test_the_detection_limit_of_every_candidate_term_is_in_the_report(tmp_path, coarse_cache):
+    settings = inject_settings(
+        simulated_set(tmp_path / "set"), coarse_cache, "inject.term=all", "diagnosis.terms=[solid_viscosity]"
+    )
+    lines = []
+    found = detection_limits(settings, tmp_path / "run", progress=lines.append)
+    trials = found["solid_viscosity"]
+    assert trials[-1].confidence and all(not t.confidence for t in trials[:-1])  # up the ladder until named
+    assert trials[-1].found == pytest.approx(trials[-1].added, rel=0.4)
+    assert len(lines) == 1 + len(trials)  # a line as each size is diagnosed
+    report = (tmp_path / "run" / "as-recorded" / "report.md").read_text()
+    assert "## What these recordings could have shown" in report
+    assert f"| `solid_viscosity` | gamma {trials[-1].added:.3g} Pa s |" in report

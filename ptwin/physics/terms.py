@@ -71,7 +71,9 @@ class Term(nn.Module):
     what it models is then fitted or removed as a nuisance; None if it stays one),
     ``KEPT_BY_COMMON_LEVEL`` (it stays a candidate after all where one common baseline level was
     removed from every curve: what it models is then still in the force),
-    ``CONTACT_CAVEAT`` (what estimated contacts hide of it on approach curves, or None).
+    ``CONTACT_CAVEAT`` (what estimated contacts hide of it on approach curves, or None),
+    ``TYPICAL`` (values samples of the field show: where ``python -m ptwin.inject`` starts its search for the
+    smallest size a set could have shown, scaling the first, the term's strength).
     """
 
     name: ClassVar[str]
@@ -82,6 +84,7 @@ class Term(nn.Module):
     WITH_ESTIMATED_CONTACT: ClassVar[str | None] = None
     KEPT_BY_COMMON_LEVEL: ClassVar[bool] = False
     CONTACT_CAVEAT: ClassVar[str | None] = None
+    TYPICAL: ClassVar[dict[str, float]]
 
     def __init__(self, probe_radius: float, **values: float):
         super().__init__()
@@ -167,6 +170,7 @@ class SolidViscosity(Term):
 
     name = "solid_viscosity"
     PARAMS = {"gamma": Parameter("Pa s", 0.0, minimum=0.0, plausible=(0.0, 1e4))}
+    TYPICAL = {"gamma": 5.0}
     TELL_APART = "a force ∝ R·U: compare base speeds a decade apart at equal depth"
     # π·γ·R·U = π·γ·U·√(2ρw) and a contact shift δ changes a sphere's force by 2E*·√(ρw)·δ: the same √w.
     CONTACT_CAVEAT = (
@@ -187,6 +191,7 @@ class SolidRelaxation(Term):
         "tau": Parameter("s", 1.0, log=True, plausible=(1e-4, 1e4)),
     }
     STARTS = [{"tau": tau} for tau in (1e-2, 1e-1, 1.0, 10.0)]
+    TYPICAL = {"g": 0.2, "tau": 0.1}
     TELL_APART = "a hold at constant depth (stress relaxation over tau)"
     ACTS_ON_ELASTIC = True
 
@@ -205,6 +210,7 @@ class PowerLawRheology(Term):
     name = "power_law_rheology"
     PARAMS = {"alpha": Parameter("–", 0.05, minimum=0.0, maximum=0.5, plausible=(0.0, 0.5))}
     STARTS = [{"alpha": alpha} for alpha in (0.02, 0.1, 0.3)]
+    TYPICAL = {"alpha": 0.05}
     TELL_APART = (
         "a hold at constant depth (the force relaxes as t^(−alpha) over seconds, where Darcy's relaxes in "
         "milliseconds) or a third speed further apart (it grows as speed^alpha, Darcy's as speed)"
@@ -228,6 +234,7 @@ class PorePressureRelaxation(Term):
     name = "pore_pressure_relaxation"
     PARAMS = {"M": Parameter("Pa", 1.0e5, log=True, plausible=(1e2, 1e8))}
     STARTS = [{"M": m} for m in (1e3, 1e4, 1e5, 1e6)]
+    TYPICAL = {"M": 3.0e4}
     TELL_APART = "a deeper indent (tau_p grows as R²) or a hold at constant depth"
 
     def lag_fluid(self, fluid_force, samples, radius, permeability, viscosity):
@@ -253,6 +260,7 @@ class StrainDependentPermeability(Term):
 
     name = "strain_dependent_permeability"
     PARAMS = {"m": Parameter("–", 0.0, minimum=0.0, plausible=(0.0, 50.0))}
+    TYPICAL = {"m": 1.0}
     TELL_APART = "a deeper indent (the effect grows with w/rho, not with speed)"
 
     def permeability_factor(self, depth):
@@ -281,6 +289,7 @@ class ContactOffset(Term):
 
     name = "contact_offset"
     PARAMS = {"delta": Parameter("m", 0.0)}
+    TYPICAL = {"delta": 0.1e-6}
     TELL_APART = "more pre-contact baseline and a slower first contact"
     WITH_ESTIMATED_CONTACT = "each curve's contact point is fitted as a nuisance"
 

@@ -26,12 +26,12 @@ import torch
 from ptwin.data.recordings import write_recordings
 from ptwin.diagnosis.words import bounded, number
 from ptwin.fitting.lm import FitError
-from ptwin.fitting.physics_fit import fit_physics, fit_with_starts
+from ptwin.fitting.physics_fit import PhysicsFit, fit_physics, fit_with_starts
 from ptwin.physics.model import total
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 from ptwin.pipeline.prepare import Prepared, prepare
-from ptwin.pipeline.run import run
+from ptwin.pipeline.run import candidate_settings, run
 from ptwin.pipeline.settings import InjectRunSettings
 
 
@@ -57,9 +57,12 @@ class Trial:
         return f"named ({self.confidence}), {strength} {found}{size}"
 
 
-def added_force(prepared: Prepared, term: str, params: dict[str, float]) -> dict[str, np.ndarray]:
-    """δF [N] of every curve (the reference too: the term acts on all), per sample in file order."""
-    fit = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+def added_force(
+    prepared: Prepared, term: str, params: dict[str, float], base_fit: PhysicsFit | None = None
+) -> dict[str, np.ndarray]:
+    """δF [N] of every curve (the reference too: the term acts on all), per sample in file order;
+    ``base_fit``: the base model fitted to the set's training samples (fitted here when None)."""
+    fit = base_fit or fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
     base = fit.model
     with_term = prepared.make_model((term,), {term: params}, fit.permeability)
     with_term.contact = base.contact  # the base fit's contact corrections
@@ -77,11 +80,13 @@ def added_force(prepared: Prepared, term: str, params: dict[str, float]) -> dict
     return {curve_id: measured[curve == i] for i, curve_id in enumerate(samples.curve_ids)}
 
 
-def write_injected(prepared: Prepared, term: str, params: dict[str, float], folder: Path) -> float:
+def write_injected(
+    prepared: Prepared, term: str, params: dict[str, float], folder: Path, base_fit: PhysicsFit | None = None
+) -> float:
     """The recordings with ``term`` at ``params`` added, written into ``folder``; the peak δF over the noise std."""
     frame = prepared.recordings.curves.copy()
     peak = 0.0
-    for curve_id, force in added_force(prepared, term, params).items():
+    for curve_id, force in added_force(prepared, term, params, base_fit).items():
         rows = (frame["curve"] == curve_id).to_numpy()
         frame.loc[rows, "force"] = frame.loc[rows, "force"].to_numpy() + force
         peak = max(peak, float(np.abs(force).max()))
@@ -95,7 +100,7 @@ def write_injected(prepared: Prepared, term: str, params: dict[str, float], fold
 def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[[str], None] = print) -> list[Trial]:
     """Diagnose the recordings as they are, then with the term added at each size; the report of the first
     gets a section on what these recordings could have shown."""
-    inject, quiet = settings.inject, lambda _: None
+    inject, quiet = settings.inject, _quiet
     strength = next(iter(VOCABULARY[inject.term].PARAMS))
     progress(f"inject: the recordings as they are ({len(inject.sizes) + 1} diagnoses in all)")
     as_recorded = run(settings, output_dir / "as-recorded", quiet)
@@ -118,6 +123,115 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
         report.write("\n" + "\n".join(section) + "\n")
     progress("\n".join(section[-1:]))
     return trials
+
+
+def detection_limits(
+    settings: InjectRunSettings, output_dir: Path, progress: Callable[[str], None] = print
+) -> dict[str, list[Trial]]:
+    """What these recordings could have shown of every candidate term: each added at the sizes whose peak
+    over the noise std is ``LADDER``'s, smallest first, until the diagnosis names it (``inject.term: all``).
+    A term's size is its strength (first parameter) times a factor, its other parameters ``Term.TYPICAL``;
+    the factor for a peak is read off a grid of the added force (cheap: no diagnosis). The report of the
+    recordings as they are gets a section with each term's smallest size named."""
+    progress("inject: the recordings as they are, then every candidate term at growing sizes until named")
+    run(settings, output_dir / "as-recorded", _quiet)
+    prepared = prepare(settings, _quiet)
+    base_fit = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+    terms = candidate_settings(prepared, settings)[0].terms
+    found, native = {}, {}
+    for i, term in enumerate(terms, start=1):
+        strength = next(iter(VOCABULARY[term].PARAMS))
+        native[term] = native_strength(prepared, term, strength, settings.optim.physics_fit.iterations)
+        found[term] = []
+        for peak, params in _ladder(prepared, term, base_fit):
+            folder = output_dir / f"{term}-peak-{peak:g}"
+            shown = write_injected(prepared, term, params, folder / "recordings", base_fit)
+            data = replace(settings.data, path=str(folder / "recordings"))
+            outcome = run(replace(settings, data=data), folder / "run", _quiet)
+            found[term].append(_trial(params[strength], params[strength], shown, outcome.diagnosis, term, strength))
+            progress(
+                f"  [{i}/{len(terms)}] {term}: {strength} {params[strength]:.3g} (peak {shown:.1f}× the noise): "
+                f"{found[term][-1].verdict(strength, native[term])}"
+            )
+            if found[term][-1].confidence:
+                break
+    section = limits_section(found, native)
+    with (output_dir / "as-recorded" / "report.md").open("a") as report:
+        report.write("\n" + "\n".join(section) + "\n")
+    return found
+
+
+LADDER = (8.0, 16.0, 32.0, 64.0)  # peaks of the added force over the noise std, tried smallest first
+_FACTORS = np.geomspace(1e-3, 1e3, 13)  # of a term's typical strength: the grid its peaks are read off (log-log)
+
+
+def _ladder(prepared: Prepared, term: str, base_fit: PhysicsFit) -> list[tuple[float, dict[str, float]]]:
+    """(peak over the noise std, the term's parameters) for each of ``LADDER``'s peaks the term reaches within
+    its physical range: its strength interpolated (log-log) where the grid of ``_FACTORS`` first crosses it,
+    walking from weak to strong (a smaller M is a stronger pore relaxation)."""
+    cls = VOCABULARY[term]
+    strength, parameter = next(iter(cls.PARAMS.items()))
+    values = [cls.TYPICAL[strength] * f for f in _FACTORS]
+    values = [v for v in values if parameter.maximum is None or v < parameter.maximum]
+    peaks = []
+    for value in values:
+        params = {**cls.TYPICAL, strength: value}
+        added = added_force(prepared, term, params, base_fit)
+        peaks.append(max(float(np.abs(force).max()) for force in added.values()) / prepared.noise.std)
+    if peaks[0] > peaks[-1]:
+        values, peaks = values[::-1], peaks[::-1]
+    ladder = []
+    for target in LADDER:
+        above = next((j for j, p in enumerate(peaks) if p >= target), None)
+        if above is None:
+            break
+        if above == 0:
+            value = values[0]
+        else:
+            a, b = np.log([peaks[above - 1], peaks[above]])
+            share = (np.log(target) - a) / (b - a) if b > a else 1.0
+            value = float(np.exp(np.log(values[above - 1]) + share * np.log(values[above] / values[above - 1])))
+        ladder.append((target, {**cls.TYPICAL, strength: value}))
+    return ladder
+
+
+def limits_section(found: dict[str, list[Trial]], native: dict[str, float]) -> list[str]:
+    """report.md's section of ``detection_limits``: each term's smallest size named, or the largest tried (a
+    size found is read against the term's ``native`` strength, as ``detection`` reads it)."""
+    lines = [
+        "## What these recordings could have shown",
+        "",
+        "Each candidate term added to these recordings at first order through the cantilever balance, everything "
+        "else as recorded, at sizes whose peak is "
+        + ", ".join(f"{p:g}" for p in LADDER)
+        + "× the noise std, smallest first, until named (`python -m ptwin.inject inject.term=all`; method and "
+        "limits in `ptwin/pipeline/inject.py`).",
+        "",
+        "| term | smallest size named | peak / noise std | verdict there | largest tried and not named |",
+        "|---|---|---|---|---|",
+    ]
+    for term, trials in found.items():
+        strength = next(iter(VOCABULARY[term].PARAMS))
+        unit = VOCABULARY[term].PARAMS[strength].unit
+        named = next((t for t in trials if t.confidence), None)
+        missed = [t for t in trials if not t.confidence]
+        last = "–"
+        if missed:
+            verdict = missed[-1].verdict(strength, native[term])
+            last = f"{strength} {missed[-1].added:.3g} {unit} ({missed[-1].peak:.0f}×: {verdict})"
+        if named is None:
+            reach = f"{trials[-1].peak:.0f}" if trials else "–"
+            lines.append(f"| `{term}` | not named up to a peak of {reach}× the noise | – | – | {last} |")
+        else:
+            lines.append(
+                f"| `{term}` | {strength} {named.added:.3g} {unit} | {named.peak:.1f} | "
+                f"{named.verdict(strength, native[term])} | {last} |"
+            )
+    return lines
+
+
+def _quiet(_: str) -> None:
+    """Progress of the runs inside an injection, not shown."""
 
 
 def _trial(size: float, added: float | None, peak: float, diagnosis: dict, term: str, strength: str) -> Trial:

@@ -92,7 +92,7 @@ def diagnose_set(
     progress: Callable[[str], None] = print,
 ) -> Diagnosis:
     """The diagnosis stage on a prepared and identified set (``twin``: the hybrid twin, None when not trained)."""
-    candidates, notes = _candidates(prepared, settings)
+    candidates, notes = candidate_settings(prepared, settings)
     return diagnose(
         prepared.make_model,
         prepared.samples,
@@ -110,7 +110,7 @@ def diagnose_set(
     )
 
 
-def _candidates(prepared: Prepared, settings: Settings) -> tuple[DiagnosisSettings, list[str]]:
+def candidate_settings(prepared: Prepared, settings: Settings) -> tuple[DiagnosisSettings, list[str]]:
     """The diagnosis settings for this set (with estimated contacts, the terms that are nuisances then
     are no candidates) and the notes on the data, with why a term was not tried."""
     notes = list(prepared.notes)

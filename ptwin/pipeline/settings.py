@@ -97,20 +97,30 @@ class MapRunSettings(Settings):
     map: MapSettings = field(default_factory=MapSettings)
 
 
+EVERY_TERM = "all"  # inject.term: every candidate term, each until named
+
+
 @dataclass
 class InjectSettings:
     """What ``python -m ptwin.inject`` adds to a recording set (the ``inject`` config group): ``term`` with
     ``values``, its parameters in the vocabulary's order (a list, so that an override replaces it whole:
     Hydra merges a dict key by key and refuses another term's keys), scaled by each of ``sizes`` in its
-    first parameter (its strength: gamma, g, alpha, m, b; M for the pore term), one diagnosis each."""
+    first parameter (its strength: gamma, g, alpha, m, b; M for the pore term), one diagnosis each.
+    ``term: all``: every candidate term instead, each at growing sizes until named (``values`` and ``sizes``
+    unused: ``ptwin.pipeline.inject.detection_limits``)."""
 
     term: str = "solid_viscosity"
     values: list[float] = field(default_factory=lambda: [5.0])
     sizes: list[float] = field(default_factory=lambda: [1.0])
 
     def __post_init__(self):
+        if self.term == EVERY_TERM:
+            return
         if self.term not in VOCABULARY:
-            raise ValueError(f"inject.term {self.term!r} is not in the vocabulary; pick one of {', '.join(VOCABULARY)}")
+            raise ValueError(
+                f"inject.term {self.term!r} is not in the vocabulary; pick one of {', '.join(VOCABULARY)}, or "
+                f"{EVERY_TERM} for each"
+            )
         names = list(VOCABULARY[self.term].PARAMS)
         if len(self.values) != len(names):
             raise ValueError(
