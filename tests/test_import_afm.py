@@ -125,6 +125,16 @@ def test_a_file_lacking_its_calibration_says_which_options_to_pass(tmp_path, cap
     assert "--sensitivity" in error and "--spring-constant" in error
 
 
+def test_a_file_afmformats_does_not_read_is_refused_in_one_line(tmp_path, capsys):
+    # afmformats' errors are BaseExceptions: FileFormatNotSupportedError escaped as a traceback.
+    (tmp_path / "notes.txt").write_text("not a force curve\n")
+    with pytest.raises(SystemExit) as stop:
+        main([str(tmp_path / "notes.txt"), "--out", str(tmp_path / "set"), *COMMON])
+    assert stop.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert error.count("\n") == 0 and "notes.txt: not a format afmformats reads" in error
+
+
 def test_files_of_different_cantilevers_are_refused(tmp_path, capsys):
     files = [str(AFM / "fmt-jpk-fd_spot3-0192.jpk-force"), str(AFM / "fmt-igor-fd_U3_3_p10004.ibw")]
     with pytest.raises(SystemExit) as exit:

@@ -61,7 +61,12 @@ def load_datasets(path: Path, overrides: dict) -> list:
     except afmformats.errors.MissingMetaDataError as error:  # a BaseException, not an Exception
         options = " and ".join(f"--{key.replace(' ', '-')}" for key in error.meta_keys)
         raise RecordingError(f"{path}: the file gives no {' or '.join(error.meta_keys)}; pass {options}") from None
-    except Exception as error:  # afmformats raises format-specific errors
+    except afmformats.errors.FileFormatNotSupportedError:  # a BaseException too
+        raise RecordingError(
+            f"{path}: not a format afmformats reads; export the curve as JPK .jpk-force, Asylum .ibw, NT-MDT text or "
+            "another format afmformats lists"
+        ) from None
+    except (Exception, afmformats.errors.AFMFileFormatError) as error:  # afmformats' are BaseExceptions
         raise RecordingError(f"{path}: afmformats cannot read it ({error}); check the file and its format") from None
     finally:
         quiet.setLevel(level)
