@@ -51,3 +51,14 @@ def test_a_hold_without_any_change_is_said_to_show_none(tmp_path):
     (hold,) = held(tmp_path, {}, permeability=1e-13)  # the Darcy force below the noise
     assert not hold.seen and hold.half_time is None
     assert "within 3 standard errors of none" in hold.sentence()
+
+
+def test_a_held_force_that_ends_below_the_baseline_is_not_read_as_a_relaxed_fraction():
+    # The real JPK stress relaxation of a cell (afmformats' test data): the baseline read off its approach, a tilt
+    # extended 11 µm into contact, left the hold relaxing from 108.8 to −97.9 nN, "by 190%". No tip pulls there.
+    from ptwin.data.relaxation import Relaxation
+
+    wrong = Relaxation("v20h", "hold", 30.0, 108.8e-9, -97.9e-9, 1e-9, 1.6)
+    assert "ends below the baseline" in wrong.sentence() and "not a measurement" in wrong.sentence()
+    right = Relaxation("v20h", "hold", 30.0, 324e-9, 116e-9, 1e-9, 1.6)
+    assert right.sentence().startswith("v20h: the force relaxes by 64.2% over the 30 s hold")

@@ -56,6 +56,14 @@ class Relaxation:
                 f"the tip sinks by {(self.end - self.start) * 1e6:.3g} µm ({100 * self.change:.1f}% of its depth) over "
                 f"the {self.duration:.3g} s creep at constant force"
             )
+        if self.kind == "hold" and self.end < -SEEN * self.error:
+            # An indenting tip pushes: a held force that ends below the baseline says the baseline removed from
+            # the curve (a level and a tilt read off its approach, extended into contact) does not hold there.
+            return (
+                f"{self.curve}: {what}: it ends below the baseline, which no indentation does; the baseline removed "
+                "from this curve (its level and tilt, read off the approach before contact) does not hold in contact, "
+                "so the relaxed fraction is not a measurement (a tilt that is a contact force already, or drift)."
+            )
         if not self.seen:
             return f"{self.curve}: {what}, within {SEEN:g} standard errors of none."
         return f"{self.curve}: {what}; half of it in the first {self.half_time:.3g} s."
