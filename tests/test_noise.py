@@ -117,3 +117,21 @@ def test_a_noise_std_written_in_meta_yaml_replaces_sigma_and_keeps_the_measured_
     assert noise.std == 3.0e-10
     assert "meta.yaml" in noise.source and BASELINE in noise.source
     assert noise.inflation == pytest.approx(ar1_inflation(0.6, 50), rel=0.25)
+
+
+def test_the_correlation_of_a_residual_in_contact_is_the_noises_where_the_baselines_are_short():
+    # Three curves' residuals after a flexible model: AR(1) noise of 20-sample memory (40% white, the shared
+    # p07's) plus what the model left, a slow wiggle of a tenth of the noise. Read off them, κ² at 50-sample blocks
+    # is the noise's (15.6), not the 40 its short baselines gave a perturbed p07, and rests on ν = 90 blocks.
+    from ptwin.data.noise import RESIDUAL, SHORT_BASELINES, residual_noise, rests_on_short_records
+
+    rng = np.random.default_rng(4)
+    wiggle = 0.1 * np.sin(np.linspace(0, 6, 1500))
+    records = [2.5e-10 * (mixed(rng, 1500, 20.0, 0.4) + wiggle) for _ in range(3)]
+    noise = residual_noise(records, 2.5e-10, 1e-3, 50)
+    truth = model_inflation(0.6, np.exp(-1 / 20), 50)
+    assert noise.inflation == pytest.approx(truth, rel=0.3)
+    assert noise.std == 2.5e-10 and noise.source == RESIDUAL and noise.blocks == pytest.approx(90)
+    assert residual_noise([records[0][:80]], 2.5e-10, 1e-3, 50) is None  # no record long enough
+    assert rests_on_short_records(replace(noise, source=f"std from noise_std; correlation from the {SHORT_BASELINES}"))
+    assert not rests_on_short_records(replace(noise, source=BASELINE))

@@ -50,6 +50,7 @@ MIN_RECORD = 30  # samples of a shorter baseline that still add to the set's poo
 BASELINE = "pre-contact baseline"
 SHORT_BASELINES = "pre-contact baselines, each shorter than 100 samples, pooled"
 SECOND_DIFFERENCES = "second differences of the curve (no baseline long enough)"
+RESIDUAL = "the hybrid twin's residual in contact (no baseline of 100 samples)"
 _MEMORIES = np.exp(-1.0 / np.geomspace(0.3, 300.0, 48))  # φ grid: correlation times 0.3–300 samples
 _SHARES = np.linspace(-0.5, 1.0, 61)  # c grid (anti-correlated cell noise has c·φ < 0)
 
@@ -196,6 +197,23 @@ def baseline_noise(time: np.ndarray, z: np.ndarray, force: np.ndarray, block: in
     if not np.any(noise):
         return None
     return _from_records([noise], block, float(np.median(np.diff(time))), BASELINE)
+
+
+def rests_on_short_records(noise: NoiseModel) -> bool:
+    """The set's correlation was read off baselines shorter than ``MIN_BASELINE``, or off none at all."""
+    return SHORT_BASELINES in noise.source or noise.source == SECOND_DIFFERENCES
+
+
+def residual_noise(records: list[np.ndarray], std: float, step: float, block: int) -> NoiseModel:
+    """The noise's correlation measured on a flexible model's residual where the baselines cannot give it
+    (``rests_on_short_records``): each curve's residual in contact, a line in time removed, fitted as the
+    baselines are (white + AR(1), the detrending's bias modelled); σ stays ``std`` (the baselines' or the
+    lab's). A model that misses some structure leaves it in the records and raises κ²: the tests it feeds
+    then err towards calling structure noise. None where no record holds ``MIN_BASELINE`` samples."""
+    detrended = [_detrended(np.arange(r.size, dtype=np.float64), r) for r in records if r.size >= MIN_BASELINE]
+    if not detrended:
+        return None
+    return replace(_from_records(detrended, block, step, RESIDUAL), std=std, record=None)
 
 
 def _detrended(z: np.ndarray, force: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ptwin.data.noise import residual_noise, rests_on_short_records
 from ptwin.diagnosis.design import ExperimentDesign
 from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, diagnose
 from ptwin.fitting.hybrid import HybridTwin
@@ -91,7 +92,13 @@ def diagnose_set(
     settings: Settings,
     progress: Callable[[str], None] = print,
 ) -> Diagnosis:
-    """The diagnosis stage on a prepared and identified set (``twin``: the hybrid twin, None when not trained)."""
+    """The diagnosis stage on a prepared and identified set (``twin``: the hybrid twin, None when not trained).
+    Where the set's baselines were too short to measure the noise's correlation, it is measured on the twin's
+    residual in contact (``ptwin.data.noise.residual_noise``), and the base model refitted under it."""
+    measured = _residual_noise(prepared, twin, settings.diagnosis.block) if twin is not None else None
+    base_fit = identification.base
+    if measured is not None:
+        prepared, base_fit = measured, None
     candidates, notes = candidate_settings(prepared, settings)
     return diagnose(
         prepared.make_model,
@@ -103,11 +110,36 @@ def diagnose_set(
         settings.optim.physics_fit.iterations,
         prepared.noise,
         progress,
-        base_fit=identification.base,
+        base_fit=base_fit,
         notes=notes,
         design=_design(prepared, settings) if settings.diagnosis.design else None,
         reference=prepared.make_model.reference,
     )
+
+
+def _residual_noise(prepared: Prepared, twin: HybridTwin, block: int) -> Prepared | None:
+    """``prepared`` with the noise's correlation measured on ``twin``'s residual in contact, where its baselines
+    could not give it (``rests_on_short_records``); None where they could, or no curve has a record long
+    enough. A curve whose own baseline measured more keeps its own κ² for the whiteness test."""
+    if not rests_on_short_records(prepared.noise):
+        return None
+    samples = prepared.samples
+    with torch.no_grad():
+        residual = (twin.predict(samples) - samples.force).cpu().numpy()
+    curve, in_contact = samples.curve.cpu().numpy(), samples.in_contact.cpu().numpy()
+    records = [residual[(curve == i) & in_contact] for i in range(len(samples.curve_ids))]
+    step = float(np.median(np.diff(samples.time.cpu().numpy()[curve == 0])))
+    noise = residual_noise(records, prepared.noise.std, step, block)
+    if noise is None:
+        return None
+    own = {c.curve: c.noise.inflation for c in prepared.curves}
+    curve_inflation = torch.tensor([max(noise.inflation, own[c]) for c in samples.curve_ids], dtype=torch.float64)
+    samples = replace(
+        samples,
+        noise_inflation=noise.inflation,
+        curve_inflation=curve_inflation.to(samples.curve.device)[samples.curve],
+    )
+    return replace(prepared, samples=samples, noise=noise)
 
 
 def candidate_settings(prepared: Prepared, settings: Settings) -> tuple[DiagnosisSettings, list[str]]:
