@@ -113,7 +113,7 @@ def test_the_pore_term_says_where_its_force_stops_depending_on_k(tmp_path, coars
 
 
 def test_a_law_that_falls_with_depth_is_no_solids_and_its_fit_is_rejected(tmp_path, coarse_cache):
-    # A viscosity 10⁴× the field's typical 5 Pa s, subtracted from the reference curve, leaves an elastic law
+    # A viscosity 10⁵× the field's typical 5 Pa s, subtracted from the reference curve, leaves an elastic law
     # falling with depth: no solid's. The right viscosity leaves it monotone.
     from ptwin.fitting.physics_fit import fit_physics
 
@@ -122,10 +122,10 @@ def test_a_law_that_falls_with_depth_is_no_solids_and_its_fit_is_rejected(tmp_pa
         tmp_path, base_speeds=(0.5e-6, 40e-6), samples=500, effects={"solid_viscosity": {"gamma": 5.0}}
     )
     right, samples = model_for(folder, basis_path, ("solid_viscosity",), {"solid_viscosity": {"gamma": 5.0}})
-    absurd, _ = model_for(folder, basis_path, ("solid_viscosity",), {"solid_viscosity": {"gamma": 5.0e4}})
+    absurd, _ = model_for(folder, basis_path, ("solid_viscosity",), {"solid_viscosity": {"gamma": 5.0e5}})
     assert right.law_fall() <= right.reference.noise_std
-    assert absurd.law_fall() > 0.05 * float(absurd.reference.reference_force.max())
+    assert absurd.law_fall() > 0.5 * float(absurd.reference.reference_force.max())
     absurd.requires_grad_(False)  # judged as it stands: no parameter fitted but K
     absurd.fluid.log_permeability.requires_grad_(True)
-    fit = fit_physics(absurd, samples, torch.nonzero(samples.in_contact).squeeze(1), iterations=1)
+    fit = fit_physics(absurd, samples, torch.nonzero(samples.in_contact).squeeze(1), iterations=0)
     assert "falls by" in fit.violations["solid_viscosity"] and not fit.physical
