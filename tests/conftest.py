@@ -1,6 +1,8 @@
+import os
 from pathlib import Path
 
 import pytest
+import torch
 from hydra import compose, initialize_config_dir
 
 from ptwin.app import register, typed
@@ -12,6 +14,11 @@ from ptwin.pipeline.run import RunResult
 from ptwin.pipeline.run import run as run_pipeline
 from ptwin.pipeline.settings import Settings
 from ptwin.synth.simulator import Experiment, simulate
+
+
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # Workers share the machine's cores: one thread each, or two workers oversubscribe two cores.
+    torch.set_num_threads(1)
 
 
 def small_config(**overrides) -> PGDConfig:
