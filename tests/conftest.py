@@ -15,7 +15,6 @@ from ptwin.pipeline.run import run as run_pipeline
 from ptwin.pipeline.settings import Settings
 from ptwin.synth.simulator import Experiment, simulate
 
-
 if os.environ.get("PYTEST_XDIST_WORKER"):
     # Workers share the machine's cores: one thread each, or two workers oversubscribe two cores.
     torch.set_num_threads(1)
