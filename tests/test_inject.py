@@ -1,6 +1,7 @@
 """What a set could have shown: a known term added to recordings at first order through the cantilever balance,
 found with its size; and on data ptwin did not write (a shared development set with real PAAm noise)."""
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -105,3 +106,18 @@ def test_the_detection_limit_of_every_candidate_term_is_in_the_report(tmp_path, 
     report = (tmp_path / "run" / "as-recorded" / "report.md").read_text()
     assert "## What these recordings could have shown" in report
     assert f"| `solid_viscosity` | gamma {trials[-1].added:.3g} Pa s |" in report
+
+
+def test_a_drag_free_offsets_remove_is_said_to_be_no_candidate_and_becomes_no_other_term(tmp_path, coarse_cache):
+    # Two speeds with estimated contacts: each curve's baseline level is removed, and the drag (b·v, a level per
+    # curve) with it; the report must say so, not "not shown up to", and nothing else may be named instead.
+    folder = simulated_set(tmp_path / "set", base_speeds=(4e-6, 40e-6), contact_point="estimate", z_start=-1e-6)
+    settings = inject_settings(
+        folder, coarse_cache, "inject.term=cantilever_drag", "inject.values=[1.0e-4]", "diagnosis.design=false"
+    )
+    trials = detection(settings, tmp_path / "run", progress=lambda _: None)
+    assert trials[-1].peak > 8 and not any(t.confidence or t.candidate for t in trials)
+    added = json.loads((tmp_path / "run" / "size-1" / "run" / "diagnosis.json").read_text())
+    assert added["left_out"] == [] and not added["unexplained"]
+    report = (tmp_path / "run" / "as-recorded" / "report.md").read_text()
+    assert "cantilever_drag was no candidate in these recordings (the curves' baseline levels" in report

@@ -31,7 +31,7 @@ from ptwin.physics.model import total
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 from ptwin.pipeline.prepare import Prepared, prepare
-from ptwin.pipeline.run import candidate_settings, run
+from ptwin.pipeline.run import RunResult, candidate_settings, run
 from ptwin.pipeline.settings import InjectRunSettings
 
 
@@ -46,12 +46,14 @@ class Trial:
     found: float | None  # the strength fitted, if named
     interval: list  # its 95% interval
     unexplained: bool
+    candidate: bool  # whether the diagnosis fitted the term at all (see ``no_candidate``)
 
     def verdict(self, strength: str, native: float) -> str:
         """What the diagnosis said of the term, in words; ``native``: the strength the recordings fit as they
         are (``native_strength``)."""
         if not self.confidence:
-            return "unexplained" if self.unexplained else "not named"
+            said = "unexplained" if self.unexplained else "not named"
+            return said if self.candidate else f"{said} (no candidate in these recordings)"
         found = bounded(self.found, self.interval, ".3g")
         size = "" if self.added is None else f"; {number(self.found - native, '.3g')} over the recordings' own"
         return f"named ({self.confidence}), {strength} {found}{size}"
@@ -104,7 +106,7 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
     strength = next(iter(VOCABULARY[inject.term].PARAMS))
     progress(f"inject: the recordings as they are ({len(inject.sizes) + 1} diagnoses in all)")
     as_recorded = run(settings, output_dir / "as-recorded", quiet)
-    trials = [_trial(0.0, None, 0.0, as_recorded.diagnosis, inject.term, strength)]
+    trials = [_trial(0.0, None, 0.0, as_recorded, inject.term, strength)]
     prepared = prepare(settings, quiet)
     native = native_strength(prepared, inject.term, strength, settings.optim.physics_fit.iterations)
     progress(f"  as recorded: {trials[0].verdict(strength, native)} ({strength} {native:.3g} fitted, named or not)")
@@ -114,7 +116,7 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
         peak = write_injected(prepared, inject.term, params, folder / "recordings")
         data = replace(settings.data, path=str(folder / "recordings"))
         outcome = run(replace(settings, data=data), folder / "run", quiet)
-        trials.append(_trial(size, params[strength], peak, outcome.diagnosis, inject.term, strength))
+        trials.append(_trial(size, params[strength], peak, outcome, inject.term, strength))
         verdict = trials[-1].verdict(strength, native)
         added = f"{strength} {params[strength]:.3g} added (peak {peak:.1f}× the noise)"
         progress(f"  [{i}/{len(inject.sizes)}] {added}: {verdict}")
@@ -148,7 +150,7 @@ def detection_limits(
             shown = write_injected(prepared, term, params, folder / "recordings", base_fit)
             data = replace(settings.data, path=str(folder / "recordings"))
             outcome = run(replace(settings, data=data), folder / "run", _quiet)
-            found[term].append(_trial(params[strength], params[strength], shown, outcome.diagnosis, term, strength))
+            found[term].append(_trial(params[strength], params[strength], shown, outcome, term, strength))
             progress(
                 f"  [{i}/{len(terms)}] {term}: {strength} {params[strength]:.3g} (peak {shown:.1f}× the noise): "
                 f"{found[term][-1].verdict(strength, native[term])}"
@@ -234,12 +236,22 @@ def _quiet(_: str) -> None:
     """Progress of the runs inside an injection, not shown."""
 
 
-def _trial(size: float, added: float | None, peak: float, diagnosis: dict, term: str, strength: str) -> Trial:
+def _trial(size: float, added: float | None, peak: float, outcome: RunResult, term: str, strength: str) -> Trial:
+    diagnosis, candidate = outcome.diagnosis, term in outcome.candidates
     entry = next((e for e in diagnosis["left_out"] if e["term"] == term), None)
     if entry is None:
-        return Trial(size, added, peak, "", None, [None, None], diagnosis["unexplained"])
+        return Trial(size, added, peak, "", None, [None, None], diagnosis["unexplained"], candidate)
     value, interval = entry["params"][strength], entry["param_interval"][strength]
-    return Trial(size, added, peak, entry["confidence"], value, interval, diagnosis["unexplained"])
+    return Trial(size, added, peak, entry["confidence"], value, interval, diagnosis["unexplained"], candidate)
+
+
+def no_candidate(term: str, trials: list[Trial]) -> str | None:
+    """Why no size could have been named where the diagnosis fitted ``term`` in none of the recordings it was
+    added to (a drag where free per-curve offsets remove it with each curve's level); None otherwise."""
+    if any(t.candidate for t in trials[1:]):
+        return None
+    reason = VOCABULARY[term].WITH_ESTIMATED_CONTACT or "it is not among diagnosis.terms"
+    return f"{term} was no candidate in these recordings ({reason}): they cannot show it at any size"
 
 
 def native_strength(prepared: Prepared, term: str, strength: str, iterations: int) -> float:
@@ -269,9 +281,9 @@ def detection_section(term: str, strength: str, trials: list[Trial], native: flo
         added = "as recorded" if trial.added is None else f"{trial.added:.3g}"
         lines.append(f"| {added} | {trial.peak:.1f} | {trial.verdict(strength, native)} |")
     named = [t for t in trials[1:] if t.confidence]
-    smallest = (
-        f"The smallest {strength} named: {named[0].added:.3g} (peak {named[0].peak:.1f}× the noise std)."
-        if named
-        else f"No size tried was named: these recordings do not show {term} at {strength} up to {trials[-1].added:.3g}."
-    )
+    if named:
+        smallest = f"The smallest {strength} named: {named[0].added:.3g} (peak {named[0].peak:.1f}× the noise std)."
+    else:
+        missed = f"these recordings do not show {term} at {strength} up to {trials[-1].added:.3g}"
+        smallest = f"No size tried was named: {no_candidate(term, trials) or missed}."
     return [*lines, "", smallest]

@@ -38,6 +38,7 @@ class RunResult:
     results: dict  # results.json
     diagnosis: dict  # diagnosis.json
     figures: dict  # {name: matplotlib figure}, each saved as name.png
+    candidates: tuple[str, ...]  # the terms the diagnosis fitted (the others were no candidates for this set)
 
 
 def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = print) -> RunResult:
@@ -82,7 +83,8 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     payload = write_outputs(output_dir, results, diagnosis, figures)
     print_summary(results, payload, progress)
     progress(f"results in {output_dir} ({results['seconds']:.1f} s)")
-    return RunResult(results, payload, figures)
+    tried = tuple(term for term in VOCABULARY if any(term in key for key in diagnosis.candidates))
+    return RunResult(results, payload, figures, tried)
 
 
 def diagnose_set(
