@@ -120,7 +120,7 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
         verdict = trials[-1].verdict(strength, native)
         added = f"{strength} {params[strength]:.3g} added (peak {peak:.1f}× the noise)"
         progress(f"  [{i}/{len(inject.sizes)}] {added}: {verdict}")
-    section = detection_section(inject.term, strength, trials, native)
+    section = detection_section(inject.term, strength, trials, native, settings.diagnosis.terms)
     with (output_dir / "as-recorded" / "report.md").open("a") as report:
         report.write("\n" + "\n".join(section) + "\n")
     progress("\n".join(section[-1:]))
@@ -245,12 +245,16 @@ def _trial(size: float, added: float | None, peak: float, outcome: RunResult, te
     return Trial(size, added, peak, entry["confidence"], value, interval, diagnosis["unexplained"], candidate)
 
 
-def no_candidate(term: str, trials: list[Trial]) -> str | None:
+def no_candidate(term: str, trials: list[Trial], listed: list[str]) -> str | None:
     """Why no size could have been named where the diagnosis fitted ``term`` in none of the recordings it was
-    added to (a drag where free per-curve offsets remove it with each curve's level); None otherwise."""
+    added to (a drag where free per-curve offsets remove it with each curve's level); None otherwise.
+    ``listed``: the diagnosis's terms as configured (``diagnosis.terms``)."""
     if any(t.candidate for t in trials[1:]):
         return None
-    reason = VOCABULARY[term].WITH_ESTIMATED_CONTACT or "it is not among diagnosis.terms"
+    if term not in listed:
+        reason = "it is not among diagnosis.terms"
+    else:
+        reason = VOCABULARY[term].WITH_ESTIMATED_CONTACT or "diagnosis.max_terms is 0: no term is fitted"
     return f"{term} was no candidate in these recordings ({reason}): they cannot show it at any size"
 
 
@@ -265,9 +269,9 @@ def native_strength(prepared: Prepared, term: str, strength: str, iterations: in
     return fit.params[term][strength] if fit.physical else 0.0
 
 
-def detection_section(term: str, strength: str, trials: list[Trial], native: float) -> list[str]:
+def detection_section(term: str, strength: str, trials: list[Trial], native: float, listed: list[str]) -> list[str]:
     """report.md's section: each size added, the verdict (the size found over the recordings' own
-    ``native`` strength), and the smallest size named."""
+    ``native`` strength), and the smallest size named (``listed``: ``diagnosis.terms``, for why none could be)."""
     lines = [
         "## What these recordings could have shown",
         "",
@@ -285,5 +289,5 @@ def detection_section(term: str, strength: str, trials: list[Trial], native: flo
         smallest = f"The smallest {strength} named: {named[0].added:.3g} (peak {named[0].peak:.1f}× the noise std)."
     else:
         missed = f"these recordings do not show {term} at {strength} up to {trials[-1].added:.3g}"
-        smallest = f"No size tried was named: {no_candidate(term, trials) or missed}."
+        smallest = f"No size tried was named: {no_candidate(term, trials, listed) or missed}."
     return [*lines, "", smallest]
