@@ -204,7 +204,7 @@ def rests_on_short_records(noise: NoiseModel) -> bool:
     return SHORT_BASELINES in noise.source or noise.source == SECOND_DIFFERENCES
 
 
-def residual_noise(records: list[np.ndarray], std: float, step: float, block: int) -> NoiseModel:
+def residual_noise(records: list[np.ndarray], std: float, step: float, block: int) -> NoiseModel | None:
     """The noise's correlation measured on a flexible model's residual where the baselines cannot give it
     (``rests_on_short_records``): each curve's residual in contact, a line in time removed, fitted as the
     baselines are (white + AR(1), the detrending's bias modelled); σ stays ``std`` (the baselines' or the

@@ -14,6 +14,7 @@ from ptwin.data.noise import residual_noise, rests_on_short_records
 from ptwin.diagnosis.design import ExperimentDesign
 from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, diagnose
 from ptwin.fitting.hybrid import HybridTwin
+from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 from ptwin.pipeline.identify import Identification, identify, per_curve_fits
 from ptwin.pipeline.prepare import Prepared, prepare
@@ -122,7 +123,8 @@ def diagnose_set(
 def _residual_noise(prepared: Prepared, twin: HybridTwin, block: int) -> Prepared | None:
     """``prepared`` with the noise's correlation measured on ``twin``'s residual in contact, where its baselines
     could not give it (``rests_on_short_records``); None where they could, or no curve has a record long
-    enough. A curve whose own baseline measured more keeps its own κ² for the whiteness test."""
+    enough. The samples are rebuilt with the new κ² (``Samples.from_curves``: a curve whose own baseline
+    measured more keeps its own for the whiteness test)."""
     if not rests_on_short_records(prepared.noise):
         return None
     samples = prepared.samples
@@ -134,13 +136,9 @@ def _residual_noise(prepared: Prepared, twin: HybridTwin, block: int) -> Prepare
     noise = residual_noise(records, prepared.noise.std, step, block)
     if noise is None:
         return None
-    own = {c.curve: c.noise.inflation for c in prepared.curves}
-    curve_inflation = torch.tensor([max(noise.inflation, own[c]) for c in samples.curve_ids], dtype=torch.float64)
-    samples = replace(
-        samples,
-        noise_inflation=noise.inflation,
-        curve_inflation=curve_inflation.to(samples.curve.device)[samples.curve],
-    )
+    by_id = {c.curve: c for c in prepared.curves}
+    fitted = [by_id[curve] for curve in samples.curve_ids]
+    samples = Samples.from_curves(fitted, noise.inflation).to(samples.time.device)
     return replace(prepared, samples=samples, noise=noise)
 
 
