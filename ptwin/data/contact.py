@@ -49,6 +49,7 @@ class Baseline:
     tilt: float  # its slope dF/dz [N/m] (virtual deflection)
     level: float = math.nan  # the curve's own baseline level at the contact [N]
     level_std: float = math.nan  # its standard error under the baseline's noise [N]
+    onset: float = math.nan  # travel from the contact to where the force leaves the first baseline for good [m]
     common: bool = False  # the set's common level was removed (the levels are one level plus drag)
 
     def with_offset(self, offset: float) -> Baseline:
@@ -83,7 +84,8 @@ def estimate_baseline(z: np.ndarray, force: np.ndarray, spring_constant: float) 
     depth = z - excess / spring_constant
     contact_z = _hertz_contact(depth, excess, depth[min(guess, z.size - 1)])  # F = 0 there, so z = w
     level = float(intercept + tilt * contact_z)
-    return Baseline(float(contact_z), level, float(tilt), level, _level_std(z[free], excess[free], contact_z))
+    onset = abs(float(z[min(guess, z.size - 1)]) - contact_z)
+    return Baseline(float(contact_z), level, float(tilt), level, _level_std(z[free], excess[free], contact_z), onset)
 
 
 def _level_std(z: np.ndarray, noise: np.ndarray, contact_z: float) -> float:

@@ -95,8 +95,11 @@ class ForceModel(nn.Module):
         return forces if elastic is None else self._with_elastic_terms(forces, samples, elastic)
 
     def _direct_forces(self, samples: Samples, permeability: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
-        """The fluid force (lagged, if a term says so) and the forces of the terms not acting on F_el [N]."""
+        """The fluid force (lagged, if a term says so) and the forces of the terms not acting on F_el [N], at the
+        depth from the true contact: the reference's own correction applied too (``ContactNuisance``)."""
         depth = self.depth(samples)
+        if self.contact is not None:
+            depth = depth - self.contact.reference
         for term in self.terms.values():
             shift = term.depth_shift()
             depth = depth if shift is None else depth - shift

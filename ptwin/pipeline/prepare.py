@@ -3,6 +3,7 @@ the split, and the factory every later stage builds its models with."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -42,6 +43,7 @@ class ModelFactory:
     device: str
     seed: int
     contact_ids: tuple[str, ...] | None = None  # fitted curves whose contacts are nuisances (estimated)
+    reference_onset: float = math.inf  # the reference's ``Baseline.onset`` [m]: how far its correction may go
 
     def __call__(
         self, terms: tuple[str, ...] = (), values: dict | None = None, permeability: float | None = None
@@ -49,7 +51,7 @@ class ModelFactory:
         """The base model with ``terms`` (starting at ``values``), K = ``permeability`` or the default."""
         meta = self.meta
         fluid = FluidForce(self.basis, permeability or self.permeability, meta.fluid_viscosity)
-        contact = ContactNuisance(self.contact_ids) if self.contact_ids is not None else None
+        contact = ContactNuisance(self.contact_ids, self.reference_onset) if self.contact_ids is not None else None
         model = ForceModel(
             self.reference,
             fluid,
@@ -120,11 +122,12 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     s = settings.split
     split = split_samples(samples, tuple(s.fractions), s.mode, s.held_out_curve, settings.seed)
     # The reference's contact is the origin of depth: a fitted hold of its own gets no correction.
-    contact_ids = None
+    contact_ids, onset = None, math.inf
     if meta.contact_point == "estimate":
         contact_ids = tuple(c for c in samples.curve_ids if c != reference.curve)
+        onset = reference.baseline.onset
     factory = ModelFactory(
-        meta, law, basis, settings.model, settings.permeability, settings.device, settings.seed, contact_ids
+        meta, law, basis, settings.model, settings.permeability, settings.device, settings.seed, contact_ids, onset
     )
     rate = rate_effect(curves, reference)
     held = relaxations(curves)

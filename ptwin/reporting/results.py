@@ -60,11 +60,12 @@ def noise_record(curves: list[CurveKinematics], pooled: NoiseModel) -> dict:
 
 
 def contact_record(curves: list[CurveKinematics], base: PhysicsFit) -> dict | None:
-    """Estimated contacts: each curve's estimate, removed baseline and the base fit's refinement relative to
-    the reference curve's [m, N, N/m]."""
+    """Estimated contacts: each curve's estimate, removed baseline and the base fit's refinement [m, N, N/m]:
+    the reference curve's own, every other curve's relative to it (``ContactNuisance``)."""
     if all(c.baseline is None for c in curves):
         return None
-    refined = base.model.contact.values() if base.model.contact is not None else {}
+    contact = base.model.contact
+    refined = {**contact.values(), base.model.reference.curve: contact.reference.item()} if contact else {}
     return {c.curve: {**asdict(c.baseline), "refinement": refined.get(c.curve, 0.0)} for c in curves if c.baseline}
 
 
