@@ -244,7 +244,7 @@ def _shape_evidence(candidates: dict, samples: Samples, seen: torch.Tensor, test
                 shape,
                 (base.chi_square, c.fit.chi_square),
                 c.fit.samples,
-                c.fit.parameter_count - base.parameter_count,
+                len(c.fit.params[term]),  # the term's own: a nuisance each fit may free or hold is no part of it
                 term,
                 false_alarm / max(len(singles), 1),
             )
