@@ -2,6 +2,7 @@
 law, its hold the data, and a concealed relaxation is named with K within 5% (issue 23)."""
 
 import pytest
+import torch
 
 from ptwin.data.recordings import write_recordings
 from ptwin.synth.simulator import Experiment, Hold, simulate
@@ -56,3 +57,30 @@ def test_one_ramp_and_hold_with_its_contact_estimated_keeps_the_contact_the_appr
     fit = fit_physics(model, prepared.samples, prepared.split.train)
     assert not model.contact.reference.requires_grad and model.contact.reference.item() == 0.0
     assert fit.permeability == pytest.approx(truth.permeability, rel=0.05)
+
+
+def test_noise_measured_on_the_residual_keeps_the_samples_as_fitted(tmp_path, coarse_cache):
+    # A baseline too short for the noise's correlation: it is measured on the twin's residual and the samples are
+    # rebuilt with it. They must be the fitted ones: of the reference only its hold (its approach is the law), not
+    # the curve as recorded (641 approach samples came back in contact when they were rebuilt from it).
+    from ptwin.data.noise import rests_on_short_records
+    from ptwin.pipeline.prepare import prepare
+    from ptwin.pipeline.run import _residual_noise
+    from tests.conftest import settings_for
+
+    truth = Experiment(
+        base_speeds=(),
+        holds=(Hold(3e-6, 2.0, 10e-6),),
+        z_start=-0.02e-6,
+        sample_rate=2000.0,
+        effects={"solid_relaxation": {"g": 0.2, "tau": 0.5}},
+    )
+    write_recordings(tmp_path / "set", *simulate(truth))
+    settings = settings_for(f"data.path={tmp_path / 'set'}", "pgd=coarse", f"cache_dir={coarse_cache}")
+    prepared = prepare(settings, progress=lambda line: None)
+    assert rests_on_short_records(prepared.noise)
+    twin = prepared.make_model.twin(truth.permeability, 1e-9, prepared.samples, prepared.split.train)
+    rebuilt = _residual_noise(prepared, twin, settings.diagnosis.block).samples
+    assert rebuilt.noise_inflation != prepared.samples.noise_inflation
+    assert torch.equal(rebuilt.in_contact, prepared.samples.in_contact)
+    assert torch.equal(rebuilt.pins_contact, prepared.samples.pins_contact)

@@ -82,6 +82,7 @@ class Prepared:
     split: Split
     make_model: ModelFactory
     noise: NoiseModel  # the set's
+    fitted: list[CurveKinematics]  # what ``samples`` holds: the curves as fitted (``_fitted_curves``)
     notes: list[str] = field(default_factory=list)  # evidence about the data, in sentences
     rate: RateEffect | None = None  # F/F_ref at equal depth of the faster approaches
     relaxations: list[Relaxation] = field(default_factory=list)  # what each hold and creep shows before any model
@@ -133,7 +134,7 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     held = relaxations(curves)
     evidence = (_spot_note(curves), drag_from_baselines(curves), rate.sentence() if rate else None)
     notes += [sentence for sentence in evidence if sentence] + [r.sentence() for r in held]
-    return Prepared(recordings, curves, basis, samples, split, factory, noise, notes, rate, held)
+    return Prepared(recordings, curves, basis, samples, split, factory, noise, fitted, notes, rate, held)
 
 
 def _fitted_curves(recordings: RecordingSet, curves, reference, law: ReferenceCurve):

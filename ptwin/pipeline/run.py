@@ -136,9 +136,7 @@ def _residual_noise(prepared: Prepared, twin: HybridTwin, block: int) -> Prepare
     noise = residual_noise(records, prepared.noise.std, step, block)
     if noise is None:
         return None
-    by_id = {c.curve: c for c in prepared.curves}
-    fitted = [by_id[curve] for curve in samples.curve_ids]
-    samples = Samples.from_curves(fitted, noise.inflation).to(samples.time.device)
+    samples = Samples.from_curves(prepared.fitted, noise.inflation).to(samples.time.device)
     return replace(prepared, samples=samples, noise=noise)
 
 
