@@ -101,9 +101,10 @@ def fit_physics(
     """
     if model.contact is None:
         vector, solver, theta = _least_squares(model, samples, index, iterations, tolerance)
+        linear = None
     else:
-        vector, solver, theta = _with_reference_contact(model, samples, index, iterations, tolerance)
-    jacobian, r = solver.checked_linearise(theta)
+        vector, solver, theta, linear = _with_reference_contact(model, samples, index, iterations, tolerance)
+    jacobian, r = solver.checked_linearise(theta) if linear is None else linear
     cov = covariance(jacobian, r) * samples.noise_inflation
     std = cov.diagonal().clamp(min=0).sqrt()
     correlation = cov / torch.outer(std, std).clamp(min=1e-300)
@@ -165,7 +166,8 @@ def _with_reference_contact(
     fit is kept (the correction stays a free parameter of the model: its intervals and covariance carry it)
     where the data fix the correction within the reference's onset (``ContactNuisance.reach``): its standard
     error no larger than the onset, its 95% Wald interval reaching into it. Else the held fit, the correction
-    back where it was and held.
+    back where it was and held. Returns ``_least_squares``'s three and (J, r) at θ where the freed fit is kept
+    (the decision linearised there), else None.
 
     Held first: from the estimate, with the other parameters far from theirs, LM moves the correction first and
     can stall there (real PAAm with 10 Pa·s added: χ² 3710 against 715 settled first, γ −0.6 against 10.1).
@@ -182,7 +184,8 @@ def _with_reference_contact(
     reference.requires_grad_(True)
     try:
         freed = _least_squares(model, samples, index, iterations, tolerance)
-        variance = covariance(*freed[1].checked_linearise(freed[2])) * samples.noise_inflation
+        linear = freed[1].checked_linearise(freed[2])
+        variance = covariance(*linear) * samples.noise_inflation
         names, sizes = freed[0].names, freed[0].sizes
         where = sum(sizes[: names.index("contact.reference")])  # its entry of θ (a set of one curve: no offsets)
         std = max(variance[where, where].item(), 0.0) ** 0.5
@@ -190,12 +193,12 @@ def _with_reference_contact(
         std = math.inf
     reach = model.contact.reach
     if std <= reach and abs(reference.item()) - 1.96 * std <= reach:
-        return freed
+        return (*freed, linear)
     held[0].set(held[2])
     with torch.no_grad():
         reference.copy_(start)
     reference.requires_grad_(False)
-    return held
+    return (*held, None)
 
 
 def _tolerated_fall(reference) -> float:
