@@ -47,7 +47,10 @@ def test_a_viscosity_added_to_a_set_is_found_with_its_size(tmp_path, coarse_cach
     settings = inject_settings(simulated_set(tmp_path / "set"), coarse_cache, "inject.sizes=[1.0]")
     trials = detection(settings, tmp_path / "run", progress=lambda _: None)
     as_recorded, added = trials
-    assert not as_recorded.confidence  # the clean set names nothing
+    assert not as_recorded.confidence  # the clean set names nothing, and says what gamma fitted alone came to
+    assert abs(as_recorded.alone) < 1.0 and f"gamma {as_recorded.alone:.3g} fitted alone" in as_recorded.verdict(
+        "gamma", 0.0
+    )
     assert added.confidence and added.found == pytest.approx(5.0, rel=0.4)
     report = (tmp_path / "run" / "as-recorded" / "report.md").read_text()
     assert "## What these recordings could have shown" in report and "The smallest gamma named: 5" in report

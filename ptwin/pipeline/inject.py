@@ -47,13 +47,16 @@ class Trial:
     interval: list  # its 95% interval
     unexplained: bool
     candidate: bool  # whether the diagnosis fitted the term at all (see ``no_candidate``)
+    alone: float | None = None  # the strength fitted with the term alone beside the base model, named or not
 
     def verdict(self, strength: str, native: float) -> str:
         """What the diagnosis said of the term, in words; ``native``: the strength the recordings fit as they
         are (``native_strength``)."""
         if not self.confidence:
             said = "unexplained" if self.unexplained else "not named"
-            return said if self.candidate else f"{said} (no candidate in these recordings)"
+            if not self.candidate:
+                return f"{said} (no candidate in these recordings)"
+            return said if self.alone is None else f"{said} ({strength} {self.alone:.3g} fitted alone)"
         found = bounded(self.found, self.interval, ".3g")
         size = "" if self.added is None else f"; {number(self.found - native, '.3g')} over the recordings' own"
         return f"named ({self.confidence}), {strength} {found}{size}"
@@ -240,7 +243,8 @@ def _trial(size: float, added: float | None, peak: float, outcome: RunResult, te
     diagnosis, candidate = outcome.diagnosis, term in outcome.candidates
     entry = next((e for e in diagnosis["left_out"] if e["term"] == term), None)
     if entry is None:
-        return Trial(size, added, peak, "", None, [None, None], diagnosis["unexplained"], candidate)
+        alone = (outcome.candidates.get(term) or {}).get(strength)
+        return Trial(size, added, peak, "", None, [None, None], diagnosis["unexplained"], candidate, alone)
     value, interval = entry["params"][strength], entry["param_interval"][strength]
     return Trial(size, added, peak, entry["confidence"], value, interval, diagnosis["unexplained"], candidate)
 

@@ -39,7 +39,8 @@ class RunResult:
     results: dict  # results.json
     diagnosis: dict  # diagnosis.json
     figures: dict  # {name: matplotlib figure}, each saved as name.png
-    candidates: tuple[str, ...]  # the terms the diagnosis fitted (the others were no candidates for this set)
+    candidates: dict[str, dict[str, float] | None]  # each term the diagnosis fitted → its values fitted alone
+    # (None: that fit failed); the others were no candidates for this set
 
 
 def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = print) -> RunResult:
@@ -84,8 +85,14 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     payload = write_outputs(output_dir, results, diagnosis, figures)
     print_summary(results, payload, progress)
     progress(f"results in {output_dir} ({results['seconds']:.1f} s)")
-    tried = tuple(term for term in VOCABULARY if any(term in key for key in diagnosis.candidates))
+    tried = {term: _alone(diagnosis, term) for term in VOCABULARY if any(term in key for key in diagnosis.candidates)}
     return RunResult(results, payload, figures, tried)
+
+
+def _alone(diagnosis: Diagnosis, term: str) -> dict[str, float] | None:
+    """``term``'s values fitted alone beside the base model, physical or not (None: not fitted alone, or failed)."""
+    alone = diagnosis.candidates.get((term,))
+    return alone.fit.params[term] if alone is not None and alone.fit is not None else None
 
 
 def diagnose_set(
