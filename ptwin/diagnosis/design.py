@@ -291,11 +291,9 @@ class ExperimentDesign:
             starts = [fit.params] + [
                 {t: {**fit.params[t], **start} for t, start in zip(fit.terms, combo)} for combo in combos
             ]
-        best = cheapest((self.make_model(fit.terms, values, fit.permeability) for values in starts), samples, index)
-        if best is None:
-            return math.inf
+        models = (self.make_model(fit.terms, values, fit.permeability) for values in starts)
         try:
-            return fit_physics(best, samples, index, REFIT, REFIT_TOLERANCE).chi_square
+            return fit_physics(cheapest(models, samples, index), samples, index, REFIT, REFIT_TOLERANCE).chi_square
         except FitError:
             return math.inf
 

@@ -241,36 +241,40 @@ def fit_with_starts(make_model, terms: tuple[str, ...], samples: Samples, index:
     γ −2.1 Pa·s, χ² 8034; from K ≥ 1e-13 m² the fluid force went and γ 6.2, χ² 7502).
 
     ``make_model(terms, values, permeability=None)`` builds a fresh ``ForceModel``. Starts the model cannot
-    evaluate or settle are skipped; ``FitError`` if none can be.
+    evaluate or settle are skipped; ``FitError`` (the last reason) if none can be.
     """
     if not terms:
         return fit_physics(make_model(terms), samples, index, iterations)
     starts = [dict(zip(terms, combo)) for combo in itertools.product(*(VOCABULARY[t].STARTS for t in terms))]
-    settled = []
+    settled, why = [], None
     for permeability in (None, PLAUSIBLE_PERMEABILITY[1]):
-        model = cheapest((make_model(terms, values, permeability) for values in starts), samples, index)
         try:
-            solver = _least_squares(model, samples, index, iterations, TOLERANCE)[1] if model else None
-        except FitError:
+            model = cheapest((make_model(terms, values, permeability) for values in starts), samples, index)
+            solver = _least_squares(model, samples, index, iterations, TOLERANCE)[1]
+        except FitError as error:
+            why = error
             continue
-        if solver is not None:
-            settled.append((solver.state["cost"].item(), model))
+        settled.append((solver.state["cost"].item(), model))
     if not settled:
-        raise FitError("the model cannot be evaluated at any of its starting values")
+        raise why
     return fit_physics(min(settled, key=lambda pair: pair[0])[1], samples, index, iterations)
 
 
-def cheapest(models: Iterable[ForceModel], samples: Samples, index: torch.Tensor) -> ForceModel | None:
+def cheapest(models: Iterable[ForceModel], samples: Samples, index: torch.Tensor) -> ForceModel:
     """The model of ``models`` (built one at a time) with the least cost on ``samples[index]`` as it stands:
-    where a fit should start. Models that cannot be evaluated there are skipped; None if none can be."""
-    best, best_cost = None, math.inf
+    where a fit should start. Models that cannot be evaluated there are skipped; ``FitError`` (the last
+    reason) if none can be."""
+    best, best_cost, why = None, math.inf, "no starting values"
     for model in models:
         vector, residual = scaled_residual(model, samples, index)
         try:
             with torch.no_grad():
                 cost = residual(vector.get()).square().sum().item()
-        except (ValueError, RuntimeError):
+        except (ValueError, RuntimeError) as error:
+            why = str(error)
             continue
         if cost < best_cost:
             best, best_cost = model, cost
+    if best is None:
+        raise FitError(f"the model cannot be evaluated at any of its starting values ({why})")
     return best
