@@ -112,7 +112,8 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
     trials = [_trial(0.0, None, 0.0, as_recorded, inject.term, strength)]
     prepared = prepare(settings, quiet)
     native = native_strength(prepared, inject.term, strength, settings.optim.physics_fit.iterations)
-    progress(f"  as recorded: {trials[0].verdict(strength, native)} ({strength} {native:.3g} fitted, named or not)")
+    own = f"{strength} {native:.3g}, the recordings' own (0 where not physical)"
+    progress(f"  as recorded: {trials[0].verdict(strength, native)}; a size found is read over {own}")
     for i, size in enumerate(sorted(inject.sizes), start=1):
         params = inject.scaled(size)
         folder = output_dir / f"size-{size:g}"
