@@ -38,21 +38,10 @@ def test_one_ramp_and_hold_with_its_contact_estimated_keeps_the_contact_the_appr
     # 3 µm indentation (the rate forces then start late) lowered χ² by more than chance, with a standard error
     # of microns: not a contact its onset (65 nm) allows, so held, and K comes out right.
     from ptwin.fitting.physics_fit import fit_physics
-    from ptwin.pipeline.prepare import prepare
-    from tests.conftest import settings_for
 
-    truth = Experiment(
-        base_speeds=(),
-        holds=(Hold(3e-6, 2.0, 10e-6),),
-        z_start=-3e-6,
-        sample_rate=2000.0,
-        effects={"solid_relaxation": {"g": 0.2, "tau": 0.5}},
-        contact_point="estimate",
-        contact_error=1e-7,
+    truth, _, prepared = _prepared_relaxation_hold(
+        tmp_path, coarse_cache, z_start=-3e-6, contact_point="estimate", contact_error=1e-7
     )
-    write_recordings(tmp_path / "set", *simulate(truth))
-    settings = settings_for(f"data.path={tmp_path / 'set'}", "pgd=coarse", f"cache_dir={coarse_cache}")
-    prepared = prepare(settings, progress=lambda line: None)
     model = prepared.make_model(("solid_relaxation",))
     fit = fit_physics(model, prepared.samples, prepared.split.train)
     assert not model.contact.reference.requires_grad and model.contact.reference.item() == 0.0
@@ -64,23 +53,30 @@ def test_noise_measured_on_the_residual_keeps_the_samples_as_fitted(tmp_path, co
     # rebuilt with it. They must be the fitted ones: of the reference only its hold (its approach is the law), not
     # the curve as recorded (641 approach samples came back in contact when they were rebuilt from it).
     from ptwin.data.noise import rests_on_short_records
-    from ptwin.pipeline.prepare import prepare
     from ptwin.pipeline.run import _residual_noise
-    from tests.conftest import settings_for
 
-    truth = Experiment(
-        base_speeds=(),
-        holds=(Hold(3e-6, 2.0, 10e-6),),
-        z_start=-0.02e-6,
-        sample_rate=2000.0,
-        effects={"solid_relaxation": {"g": 0.2, "tau": 0.5}},
-    )
-    write_recordings(tmp_path / "set", *simulate(truth))
-    settings = settings_for(f"data.path={tmp_path / 'set'}", "pgd=coarse", f"cache_dir={coarse_cache}")
-    prepared = prepare(settings, progress=lambda line: None)
+    truth, settings, prepared = _prepared_relaxation_hold(tmp_path, coarse_cache, z_start=-0.02e-6)
     assert rests_on_short_records(prepared.noise)
     twin = prepared.make_model.twin(truth.permeability, 1e-9, prepared.samples, prepared.split.train)
     rebuilt = _residual_noise(prepared, twin, settings.diagnosis.block).samples
     assert rebuilt.noise_inflation != prepared.samples.noise_inflation
     assert torch.equal(rebuilt.in_contact, prepared.samples.in_contact)
     assert torch.equal(rebuilt.pins_contact, prepared.samples.pins_contact)
+
+
+def _prepared_relaxation_hold(tmp_path, coarse_cache, **experiment):
+    """One 3 µm ramp-and-hold (2 s, 2 kHz) concealing a solid relaxation, written and prepared on the coarse
+    basis: (the truth, the settings, ``Prepared``)."""
+    from ptwin.pipeline.prepare import prepare
+    from tests.conftest import settings_for
+
+    truth = Experiment(
+        base_speeds=(),
+        holds=(Hold(3e-6, 2.0, 10e-6),),
+        sample_rate=2000.0,
+        effects={"solid_relaxation": {"g": 0.2, "tau": 0.5}},
+        **experiment,
+    )
+    write_recordings(tmp_path / "set", *simulate(truth))
+    settings = settings_for(f"data.path={tmp_path / 'set'}", "pgd=coarse", f"cache_dir={coarse_cache}")
+    return truth, settings, prepare(settings, progress=lambda line: None)
