@@ -50,8 +50,9 @@ def test_demo_names_pore_pressure_relaxation(demo_run):
     assert stages["hybrid"]["test_rmse"] < 0.5 * stages["elastic_darcy"]["test_rmse"]
 
 
-def candidate(terms, chi_square, val_rmse, violations=None, whiteness=1.0):
-    """A candidate with a chosen misfit: BIC = n log(χ²/n) + p log n over n = 1000 samples."""
+def candidate(terms, chi_square, val_rmse, violations=None, whiteness=1.0, residual=None):
+    """A candidate with a chosen misfit: BIC = n log(χ²/n) + p log n over n = 1000 samples; ``residual`` on the
+    judged samples (noise units)."""
     from ptwin.diagnosis.name import Candidate
     from ptwin.fitting.physics_fit import PhysicsFit
 
@@ -59,30 +60,44 @@ def candidate(terms, chi_square, val_rmse, violations=None, whiteness=1.0):
     fit = PhysicsFit(
         terms, 1.0, 0.1, params, params, params, violations or {}, chi_square, 1000, 1, None, 1 + len(terms)
     )
-    return Candidate(terms, fit, val_rmse, whiteness)
+    return Candidate(terms, fit, val_rmse, whiteness, residual=residual)
 
 
 def test_choose_takes_the_lowest_physical_bic_then_prunes_what_does_not_pay_twice():
-    from ptwin.diagnosis.name import choose, confounded, rejected
+    import numpy as np
 
+    from ptwin.diagnosis.name import HeldOutTest, choose, confounded, rejected
+    from ptwin.diagnosis.null import ScaledF, StructureTest
+
+    rng = np.random.default_rng(5)
+    noise, shape = rng.standard_normal(1000), np.sqrt(np.linspace(0.0, 1.0, 1000))
+    white = StructureTest(ScaledF(1.0, 1.0, math.inf), {}, 0.01, 0.0, rng.standard_normal((1000, 200)))
+    held_out = HeldOutTest(white, np.arange(1000) % 5 == 0, 0.01)  # every fifth sample validates
     candidates = {
         c.terms: c
         for c in (
-            candidate((), 2000.0, 2.0),
-            candidate(("a",), 1100.0, 1.0),
-            candidate(("b",), 1900.0, 1.9),
-            candidate(("c",), 1000.0, 0.9, {"c": "p < 0"}),  # the best fit, but not physical
-            candidate(("d",), 1101.0, 1.01),  # as good as a: confounded with it
-            candidate(("a", "b"), 1080.0, 0.98),  # 11 BIC better than a, but only 2% on held-out data
+            candidate((), 2000.0, 2.0, residual=noise + shape),
+            candidate(("a",), 1100.0, 1.0, residual=noise),  # a explains the shape
+            candidate(("b",), 1900.0, 1.9, residual=noise + 0.95 * shape),
+            candidate(("c",), 1000.0, 0.9, {"c": "p < 0"}, residual=noise),  # the best fit, but not physical
+            candidate(("d",), 1101.0, 1.01, residual=noise + 0.02 * shape),  # as good as a: confounded with it
+            # 11 BIC better than a, but what b adds to a is noise of the train samples: nothing on held-out ones
+            candidate(("a", "b"), 1080.0, 0.98, residual=noise + 0.05 * rng.standard_normal(1000)),
         )
     }
-    chosen, notes = choose(candidates, bic_margin=10.0, heldout_margin=0.10)
+    chosen, notes = choose(candidates, 10.0, held_out)
     assert chosen == ("a",)
-    assert notes == ["b pruned: removing it costs 11.4 BIC and 2.0% of the validation RMS (needs ≥ 10 and ≥ 10%)"]
-    assert confounded(candidates, chosen, 10.0, 0.10) == [("d",)]
+    assert len(notes) == 1 and notes[0].startswith("b pruned: removing it costs 11.4 BIC (needs ≥ 10), and on the ")
+    assert "where noise and a model error of 0.15 noise std give at most" in notes[0]
+    assert confounded(candidates, chosen, 10.0, held_out) == [("d",)]
     assert rejected(candidates, 10.0) == [{"term": "c", "params": {"p": 1.0}, "why": "p < 0"}]
-    strong_pair = {**candidates, ("a", "b"): candidate(("a", "b"), 1050.0, 0.8)}
-    assert choose(strong_pair, 10.0, 0.10) == (("a", "b"), [])
+    # b explaining a second shape left in a's residual, by as much on held-out samples: both are kept.
+    strong_pair = {
+        **candidates,
+        ("a",): candidate(("a",), 1100.0, 1.0, residual=noise + shape[::-1]),
+        ("a", "b"): candidate(("a", "b"), 1050.0, 0.8, residual=noise),
+    }
+    assert choose(strong_pair, 10.0, held_out) == (("a", "b"), [])
 
 
 class AboveFive:

@@ -134,3 +134,48 @@ def test_a_terms_gain_on_noise_alone_is_chi_square_whatever_the_correlation():
     tolerated = MODEL_ERROR * shape / np.sqrt(np.mean(shape**2))
     assert np.mean([e.beyond for e in _term_draws(test, shape, draws, tolerated)]) <= 0.1
     assert all(e.beyond for e in _term_draws(test, shape, draws, 3 * tolerated))
+
+
+def _held_out_draws(test, shape, noise_draws, validation, error):
+    """``HeldOutTest`` evidence of a one-parameter term of ``shape`` (noise units) fitted by least squares on the
+    samples outside ``validation`` to each column of ``noise_draws`` + the model error ``error``, the smaller
+    model being zero."""
+    from types import SimpleNamespace
+
+    from ptwin.diagnosis.name import Candidate, HeldOutTest
+
+    held_out = HeldOutTest(test, validation, 0.1)
+    train = ~validation
+    smaller_fit, larger_fit = SimpleNamespace(params={}), SimpleNamespace(params={"term": {"size": 1.0}})
+    evidence = []
+    for column in (noise_draws + error[:, None]).T:
+        size = (shape[train] @ column[train]) / (shape[train] @ shape[train])
+        smaller = Candidate((), smaller_fit, 1.0, 1.0, residual=column)
+        larger = Candidate(("term",), larger_fit, 1.0, 1.0, residual=column - size * shape)
+        evidence.append(held_out.evidence(smaller, larger, "term"))
+    return evidence
+
+
+def test_a_terms_held_out_gain_exceeds_noise_and_model_error_at_most_as_often_as_stated():
+    # The selection's held-out test (name.HeldOutTest): a smooth term fitted on 85% of the samples, its gain on the
+    # other 15% in AR(1) noise. Noise and a tolerated model error shaped like the term (the worst case) pass it at
+    # most one time in ten (the stated α); a term three times that size always does.
+    share, memory = 0.6, np.exp(-1 / 5)
+    inflation = max(1.0, model_inflation(share, memory, BLOCK))
+    noise = NoiseModel(2e-10, share * memory, inflation, 0.0, "known", 0, share, memory)
+    samples = flat_samples(3, 1000, 2e-10, inflation)
+    test = structure_test(samples, torch.arange(3000), None, noise, BLOCK, 0.1)
+    shape = np.sqrt(samples.depth.numpy() / 1e-6) * (1.0 + samples.curve.numpy())
+    rng = np.random.default_rng(13)
+    validation = rng.random(3000) < 0.15
+    draws = np.stack(
+        [
+            np.sqrt(1 - share) * rng.standard_normal(3000) + np.sqrt(share) * correlated_noise(rng, 3000, 1.0, memory)
+            for _ in range(600)
+        ],
+        axis=1,
+    )
+    tolerated = MODEL_ERROR * shape / np.sqrt(np.mean(shape**2))
+    assert np.mean([e.beyond for e in _held_out_draws(test, shape, draws, validation, 0 * tolerated)]) <= 0.1
+    assert np.mean([e.beyond for e in _held_out_draws(test, shape, draws, validation, tolerated)]) <= 0.1
+    assert all(e.beyond for e in _held_out_draws(test, shape, draws, validation, 3 * tolerated))

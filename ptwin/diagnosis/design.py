@@ -21,12 +21,12 @@ protocol is screened first by the candidates' difference at their current values
 optimistic bound: no refit) and the ``VERIFIED`` most promising are refitted.
 
 A separation is enough only where the diagnosis's own rules would then tell the two apart:
-``TARGET`` for the information criterion, and the wrong one's validation RMS above the right
-one's by the held-out margin over the whole set once recorded (a curve's excess must outweigh
-10% of the noise of everything already recorded: 38× the noise on one new curve beside three
-thousand recorded samples left a pair confounded). The proposal is the verified protocol that
-reaches both in the least recording time (curves × duration, at most ``MAX_REPEATS``), or else
-the one separating most per √time, with a sentence saying it will not be enough.
+``TARGET`` for the information criterion, and the wrong one's RMS above the right one's by
+the held-out margin over the whole set once recorded, which the grade asks of a named term on
+curves left out of the fit (a curve's excess must outweigh 10% of the noise of everything
+already recorded). The proposal is the verified protocol that reaches both in the least
+recording time (curves × duration, at most ``MAX_REPEATS``), or else the one separating most
+per √time, with a sentence saying it will not be enough.
 """
 
 from __future__ import annotations
@@ -119,7 +119,7 @@ class ExperimentDesign:
     samples: Samples
     index: torch.Tensor
     smoothing: float = 0.05
-    heldout_margin: float = 0.10  # the selection rules' validation-RMS margin (``DiagnosisSettings``)
+    heldout_margin: float = 0.10  # the grade's held-out margin (``DiagnosisSettings``)
     _simulated: dict = field(default_factory=dict, repr=False)  # (candidate, protocol) → CurveSimulation
     _refitted: dict = field(default_factory=dict, repr=False)  # (candidate, truth, protocol) → χ² refitted
 
@@ -181,8 +181,8 @@ class ExperimentDesign:
         )
         if best.repeats > MAX_REPEATS:
             sentence += (
-                f"; not enough for the {100 * self.heldout_margin:.0f}% validation margin ptwin's rules need to tell "
-                f"them apart, which no protocol of its menu reaches in {MAX_REPEATS} curves"
+                f"; not enough for the {100 * self.heldout_margin:.0f}% held-out margin a strong verdict needs, "
+                f"which no protocol of its menu reaches in {MAX_REPEATS} curves"
             )
         return {
             "protocol": best.protocol.segments(),

@@ -14,7 +14,7 @@ from ptwin.diagnosis.confidence import Grade, HeldOut, grade, held_out_curves
 from ptwin.diagnosis.design import MAX_REPEATS, ExperimentDesign, Prediction
 from ptwin.diagnosis.intervals import profile_interval, within
 from ptwin.diagnosis.locate import Mismatch, locate
-from ptwin.diagnosis.name import Candidate, choose, confounded, fit_candidates, rejected
+from ptwin.diagnosis.name import Candidate, HeldOutTest, choose, confounded, fit_candidates, rejected
 from ptwin.diagnosis.null import (
     MODEL_ERROR,
     StructureTest,
@@ -49,10 +49,10 @@ class DiagnosisSettings:
 
     terms: list[str] = field(default_factory=lambda: list(VOCABULARY))
     max_terms: int = 2
-    bic_margin: float = 10.0  # a term stays only if removing it costs at least this much BIC ...
-    heldout_margin: float = 0.10  # ... and at least this fraction of the validation RMS
+    bic_margin: float = 10.0  # a term stays only if removing it costs at least this much BIC
+    heldout_margin: float = 0.10  # a named term gaining less RMS on curves left out of the fit is weak
     block: int = 50  # samples per block of the whiteness test
-    false_alarm: float = 0.01  # how often noise alone reads as structure (the whiteness test's size)
+    false_alarm: float = 0.01  # how often noise alone reads as structure, or as a held-out gain
     design: bool = True  # propose the recording that separates confounded candidates (simulated; seconds)
 
     def __post_init__(self):
@@ -164,7 +164,8 @@ def diagnose(
     base = candidates[()]
     twin = _twin_rmse(hybrid, samples, split)
     evidence = _shape_evidence(candidates, samples, seen, test, s.false_alarm)
-    pick = _select(candidates, s, test, twin["val_rmse"], noise.std, evidence)
+    held_out = HeldOutTest(test, torch.isin(seen, split.val).cpu().numpy(), s.false_alarm)
+    pick = _select(candidates, s, test, twin["val_rmse"], noise.std, evidence, held_out)
     with torch.no_grad():
         base_residual = base.fit.model(samples)[seen] - samples.force[seen]
     where = locate(samples, base_residual, seen, s.block, test) if pick.structured else []
@@ -174,7 +175,7 @@ def diagnose(
     notes += [f"{' + '.join(t) or 'base'}: {c.state}" for t, c in candidates.items() if c.without_effect]
     notes += _permeability_notes(candidates[pick.chosen].fit, samples)
     fit = _fit_table(samples, split, base, corrected, twin)
-    rivals = _rivals(candidates, pick, s)
+    rivals = _rivals(candidates, pick, s, held_out)
     confounds = [_confound(chosen, other, candidates) for other in rivals]
     predictions = _tell_apart(confounds, rivals, corrected, candidates, design, progress) if design is not None else []
     progress("diagnosis: the named terms on curves left out of the fit, and intervals under the noise model")
@@ -258,6 +259,7 @@ def _select(
     flexible: float | None,
     noise_std: float,
     evidence: dict[str, TermEvidence],
+    held_out: HeldOutTest,
 ) -> _Selection:
     """Structure in the base residual (``test``): the chosen subset (``choose``), or unexplained if there is
     none, or if it leaves structure that a flexible model captures: the hybrid twin (validation RMS
@@ -273,7 +275,7 @@ def _select(
     such a margin over thousands of samples)."""
     base = candidates[()]
     if base.leaves_structure(test):
-        chosen, notes = choose(candidates, s.bic_margin, s.heldout_margin)
+        chosen, notes = choose(candidates, s.bic_margin, held_out)
         corrected = candidates[chosen]
         if chosen and not corrected.leaves_structure(test):
             return _Selection(True, chosen, notes=notes)
@@ -292,7 +294,7 @@ def _select(
             )
         return _Selection(True, unexplained=True, notes=notes)
     if any(e.beyond for e in evidence.values()):
-        chosen, notes = choose({t: c for t, c in candidates.items() if len(t) <= 1}, s.bic_margin, s.heldout_margin)
+        chosen, notes = choose({t: c for t, c in candidates.items() if len(t) <= 1}, s.bic_margin, held_out)
         if chosen and evidence[chosen[0]].beyond:
             notes.append(
                 f"The residual as a whole is within the noise ({test.words(base.whiteness)}), but in the shape of "
@@ -311,13 +313,13 @@ def _select(
     return _Selection(False, preferred=best.terms, notes=[why])
 
 
-def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings) -> list[tuple[str, ...]]:
+def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings, held_out: HeldOutTest) -> list[tuple[str, ...]]:
     """Subsets that explain the data about as well as the chosen one; with nothing named, the term the
     information criterion alone prefers and the single terms that explain the data as well as the base
     model does, with values samples of the field have, but with a materially different K (K is then not
     fixed by the data; a K of 1e305 m² beside m = 2800 is no rival, only a degenerate parametrisation)."""
     if pick.chosen:
-        return confounded(candidates, pick.chosen, s.bic_margin, s.heldout_margin)
+        return confounded(candidates, pick.chosen, s.bic_margin, held_out)
     if pick.unexplained:
         return []
     base = candidates[()].fit

@@ -1,10 +1,11 @@
 """Name the physics: fit base + every candidate subset jointly with K, then choose.
 
-Selection, as measured to name the exact set on concealed effects: among the
-*physical* fits take the lowest BIC, then prune any term whose removal costs less
-than ``bic_margin`` BIC or less than ``heldout_margin`` of the validation RMS. BIC
-alone admits spurious terms and held-out error alone cannot split some pairs, so a
-term must pass both. Subsets of k terms are fitted only when the best of k − 1 leaves
+Selection: among the *physical* fits take the lowest BIC, then prune any term whose
+removal costs less than ``bic_margin`` BIC, or less validation χ² than noise and a model
+error of ``MODEL_ERROR`` noise std would give it one time in ``1/false_alarm``
+(``HeldOutTest``). BIC alone admits spurious terms (a model error of a tenth of the noise
+earns any margin over thousands of samples) and held-out error alone cannot split some
+pairs, so a term must pass both. Subsets of k terms are fitted only when the best of k − 1 leaves
 structure (greedy forward selection would miss pairs whose members barely help alone;
 fitting every pair whenever a single is not enough does not).
 """
@@ -16,10 +17,11 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 
 from ptwin.diagnosis.locate import pooled_whiteness
-from ptwin.diagnosis.null import StructureTest
+from ptwin.diagnosis.null import StructureTest, TermEvidence, term_evidence
 from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, fit_with_starts, rmse
 from ptwin.fitting.split import Split
@@ -35,6 +37,7 @@ class Candidate:
     val_rmse: float  # [N]
     whiteness: float  # of the residual on train + val, in units of the noise model
     failure: str | None = None  # why the fit failed
+    residual: np.ndarray | None = None  # model − measured on the judged samples (noise units); None: failed
 
     @property
     def usable(self) -> bool:
@@ -110,11 +113,39 @@ def _candidate(subset, fit, make_model, samples, split, seen, iterations, block)
         return Candidate(subset, None, math.inf, math.inf, str(error))
     with torch.no_grad():
         residual = fit.model(samples)[seen] - samples.force[seen]
+        scaled = (residual / samples.noise_floor[seen]).cpu().numpy()
     whiteness = pooled_whiteness(samples, residual, seen, block)
-    return Candidate(subset, fit, rmse(fit.model, samples, split.val), whiteness)
+    return Candidate(subset, fit, rmse(fit.model, samples, split.val), whiteness, residual=scaled)
 
 
-def choose(candidates: dict, bic_margin: float, heldout_margin: float) -> tuple[tuple[str, ...], list[str]]:
+@dataclass(frozen=True)
+class HeldOutTest:
+    """Whether one model predicts the validation samples better than another beyond what noise and model error
+    give: ``null.term_evidence`` on the validation share of the judged samples (``validation``, a mask over
+    them). Under the other model with its noise, the drop in validation χ² is at most the square of the
+    residual's projection on the direction the better model adds (2 r·s − s² ≤ (r·ŝ)²); that direction was
+    fitted on the train samples, so noise along it is ``test``'s (correlation, the reference's noise shared)
+    and a model error of ``MODEL_ERROR`` σ adds at most its Cauchy–Schwarz bound: a false-alarm rate of at
+    most ``false_alarm`` a decision, as the shape evidence has on the train samples."""
+
+    test: StructureTest
+    validation: np.ndarray  # bool over the judged samples
+    false_alarm: float
+
+    def evidence(self, smaller: Candidate, larger: Candidate, label: str) -> TermEvidence:
+        """What ``larger`` gains over ``smaller`` on the validation samples, ``label`` naming what it adds."""
+        gained = np.where(self.validation, smaller.residual - larger.residual, 0.0)
+        chi_square = (
+            float(np.sum(smaller.residual[self.validation] ** 2)),
+            float(np.sum(larger.residual[self.validation] ** 2)),
+        )
+        # the parameters of the terms ``larger`` adds (a nuisance a fit may free or hold is no part of them)
+        parameters = max(sum(len(larger.fit.params[t]) for t in larger.terms if t not in smaller.terms), 1)
+        samples = int(self.validation.sum())
+        return term_evidence(self.test, gained, chi_square, samples, parameters, label, self.false_alarm)
+
+
+def choose(candidates: dict, bic_margin: float, held_out: HeldOutTest) -> tuple[tuple[str, ...], list[str]]:
     """The accepted subset and the reasons for every term pruned on the way."""
     usable = {t: c for t, c in candidates.items() if c.usable}
     chosen = min(usable, key=lambda t: usable[t].fit.bic)
@@ -127,21 +158,21 @@ def choose(candidates: dict, bic_margin: float, heldout_margin: float) -> tuple[
             if without not in usable:
                 continue
             bic_cost = usable[without].fit.bic - usable[chosen].fit.bic
-            heldout_cost = usable[without].val_rmse / usable[chosen].val_rmse - 1
-            if bic_cost < bic_margin or heldout_cost < heldout_margin:
+            gain = held_out.evidence(usable[without], usable[chosen], term)
+            if bic_cost < bic_margin or not gain.beyond:
                 notes.append(
-                    f"{term} pruned: removing it costs {bic_cost:.1f} BIC and {100 * heldout_cost:.1f}% of the "
-                    f"validation RMS (needs ≥ {bic_margin:g} and ≥ {100 * heldout_margin:g}%)"
+                    f"{term} pruned: removing it costs {bic_cost:.1f} BIC (needs ≥ {bic_margin:g}), and on the "
+                    f"validation samples {gain.words()}"
                 )
                 chosen, pruned = without, True
                 break
     return chosen, notes
 
 
-def confounded(candidates: dict, chosen: tuple[str, ...], bic_margin: float, heldout_margin: float):
+def confounded(candidates: dict, chosen: tuple[str, ...], bic_margin: float, held_out: HeldOutTest):
     """Other usable subsets of the chosen size that explain the data as well by either measure: a term is
-    kept only if removing it costs both margins (``choose``), so a rival is told apart only if it falls short
-    of the chosen subset by both."""
+    kept only if removing it costs the BIC margin and the held-out test (``choose``), so a rival is told
+    apart only if it falls short of the chosen subset by both."""
     if not chosen:
         return []
     best = candidates[chosen]
@@ -151,7 +182,7 @@ def confounded(candidates: dict, chosen: tuple[str, ...], bic_margin: float, hel
         if len(t) == len(chosen)
         and t != chosen
         and c.usable
-        and (c.fit.bic - best.fit.bic < bic_margin or c.val_rmse / best.val_rmse - 1 < heldout_margin)
+        and (c.fit.bic - best.fit.bic < bic_margin or not held_out.evidence(c, best, " + ".join(chosen)).beyond)
     ]
 
 
