@@ -137,7 +137,9 @@ class FluidForce(nn.Module):
 
     def evaluate(self, velocity, contact_radius, height, permeability) -> torch.Tensor:
         """The force for an explicit permeability [m²]: a scalar, or one per point of the batch."""
-        shape = torch.broadcast_shapes(velocity.shape, contact_radius.shape, height.shape)
+        shape = velocity.shape
+        if not shape == contact_radius.shape == height.shape:  # torch.broadcast_shapes is Python: ~1 ms a call
+            shape = torch.broadcast_shapes(shape, contact_radius.shape, height.shape)
         u, r, h = (t.expand(shape).reshape(-1) for t in (velocity, contact_radius, height))
         self._check_inputs(u, r, h)
         smallest = self.functions["contact_radius"].minimum

@@ -17,9 +17,10 @@ def linear_recurrence(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     n = a.shape[-1]
     shift = 1
     while shift < n:
-        a_before = torch.cat([torch.ones_like(a[..., :shift]), a[..., :-shift]], dim=-1)
-        b_before = torch.cat([torch.zeros_like(b[..., :shift]), b[..., :-shift]], dim=-1)
-        a, b = a * a_before, a * b_before + b
+        # The first ``shift`` samples have nothing before them: kept as they are, not padded with ones and
+        # zeros (under forward AD each padded constant costs a tangent of its own).
+        b = torch.cat([b[..., :shift], a[..., shift:] * b[..., :-shift] + b[..., shift:]], dim=-1)
+        a = torch.cat([a[..., :shift], a[..., shift:] * a[..., :-shift]], dim=-1)
         shift *= 2
     return b
 
