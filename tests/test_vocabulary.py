@@ -47,3 +47,37 @@ def test_a_toy_term_is_fitted_selected_reported_and_plotted(tmp_path, coarse_cac
     assert f"Left out: `{RateStiffening.name}`" in (tmp_path / "run" / "report.md").read_text()
     title = outcome.figures["diagnosis_curves"].axes[0].get_title()
     assert RateStiffening.name in title
+
+
+def test_a_term_acting_on_the_fluid_force_alone_settles_from_the_default_permeability_only(monkeypatch):
+    from types import SimpleNamespace
+
+    import torch
+
+    import ptwin.fitting.physics_fit as physics_fit
+
+    # Which terms can carry what the fluid force carries, read off their hooks: a rate or elastic force can.
+    assert {name for name, term in VOCABULARY.items() if term.fluid_only()} == {
+        "pore_pressure_relaxation",
+        "strain_dependent_permeability",
+        "contact_offset",
+    }
+    assert not RateStiffening.fluid_only()
+    asked = []
+
+    def make_model(terms, values, permeability=None):
+        asked.append(permeability)
+        return permeability
+
+    settled = SimpleNamespace(state={"cost": torch.tensor(1.0)})
+    monkeypatch.setattr(physics_fit, "cheapest", lambda models, samples, index: list(models)[-1])
+    monkeypatch.setattr(physics_fit, "_least_squares", lambda model, *rest: (None, settled, None))
+    monkeypatch.setattr(physics_fit, "fit_physics", lambda model, *rest: model)
+    for terms, starts in (
+        (("pore_pressure_relaxation",), {None}),
+        (("pore_pressure_relaxation", "strain_dependent_permeability"), {None}),
+        (("pore_pressure_relaxation", "solid_viscosity"), {None, physics_fit.PLAUSIBLE_PERMEABILITY[1]}),
+    ):
+        asked.clear()
+        physics_fit.fit_with_starts(make_model, terms, None, None)
+        assert set(asked) == starts, terms

@@ -238,7 +238,8 @@ def fit_with_starts(make_model, terms: tuple[str, ...], samples: Samples, index:
 
     Why two K: a term that is a rate force (a viscosity ∝ U, a drag) can carry what the fluid force carries, and
     LM from the default K stays where the fluid carries it (real agarose with 5 Pa·s added: from K = 2e-16 m²
-    γ −2.1 Pa·s, χ² 8034; from K ≥ 1e-13 m² the fluid force went and γ 6.2, χ² 7502).
+    γ −2.1 Pa·s, χ² 8034; from K ≥ 1e-13 m² the fluid force went and γ 6.2, χ² 7502). Terms that act on the
+    fluid force alone (``Term.fluid_only``) carry nothing with it gone: they settle from the default K only.
 
     ``make_model(terms, values, permeability=None)`` builds a fresh ``ForceModel``. Starts the model cannot
     evaluate or settle are skipped; ``FitError`` (the last reason) if none can be.
@@ -247,7 +248,8 @@ def fit_with_starts(make_model, terms: tuple[str, ...], samples: Samples, index:
         return fit_physics(make_model(terms), samples, index, iterations)
     starts = [dict(zip(terms, combo)) for combo in itertools.product(*(VOCABULARY[t].STARTS for t in terms))]
     settled, why = [], None
-    for permeability in (None, PLAUSIBLE_PERMEABILITY[1]):
+    fluid_off = () if all(VOCABULARY[t].fluid_only() for t in terms) else (PLAUSIBLE_PERMEABILITY[1],)
+    for permeability in (None, *fluid_off):
         try:
             model = cheapest((make_model(terms, values, permeability) for values in starts), samples, index)
             solver = _least_squares(model, samples, index, iterations, TOLERANCE)[1]

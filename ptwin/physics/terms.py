@@ -95,6 +95,12 @@ class Term(nn.Module):
             self.register_parameter(self.raw_name(name), nn.Parameter(torch.tensor(raw, dtype=torch.float64)))
 
     @classmethod
+    def fluid_only(cls) -> bool:
+        """Whether its hooks change the fluid force alone (no rate force, no hereditary elastic force): with the
+        fluid force gone (K at the most permeable plausible material) it does nothing."""
+        return cls.force is Term.force and cls.elastic_force is Term.elastic_force
+
+    @classmethod
     def raw_name(cls, name: str) -> str:
         return f"log_{name}" if cls.PARAMS[name].log else name
 
