@@ -13,7 +13,7 @@ from collections.abc import Sequence
 
 import torch
 from torch import nn
-from torch.func import functional_call, grad, jacfwd, vmap
+from torch.func import functional_call, grad, vmap
 
 from ptwin.fitting.lm import ParameterVector, jacobian_and_value
 from ptwin.physics.model import PERMEABILITY, ForceModel
@@ -135,8 +135,8 @@ class HybridResidual:
 
     The physics model depends on its own parameters only and the network on its own, so each is
     differentiated apart — the physics by jacfwd over its few parameters, the network by per-sample
-    gradients (``ErrorNetwork.jacobian``) — and J follows by the chain rule through the residual's assembly,
-    written once. (jacfwd over all of θ pushed the network's ~25 tangents through every sample: most of a
+    gradients (``ErrorNetwork.jacobian``) — and J follows by the chain rule through the residual's assembly
+    (``_assembled_jacobian``). (jacfwd over all of θ pushed the network's ~25 tangents through every sample: most of a
     hybrid step.)
     """
 
@@ -180,12 +180,20 @@ class HybridResidual:
             jacobians["physics"] = values["physics"].new_zeros(values["physics"].numel(), 0)
         network = self._own("network", theta)
         jacobians["network"], values["network"] = self.twin.network.jacobian(self.samples, self.index, network)
+        return self._assembled_jacobian(jacobians, theta), self._assemble(values["physics"], values["network"], theta)
 
-        def linearised(t):  # each model replaced by its tangent at θ: the same J, through _assemble
-            moved = {part: values[part] + jacobians[part] @ (t - theta)[self.columns[part]] for part in values}
-            return self._assemble(moved["physics"], moved["network"], t)
-
-        return jacfwd(linearised)(theta), self._assemble(values["physics"], values["network"], theta)
+    def _assembled_jacobian(self, jacobians: dict[str, torch.Tensor], theta: torch.Tensor) -> torch.Tensor:
+        """∂/∂θ of ``_assemble`` from each model's own Jacobian: the error −∂F/σ, the mismatch (∂Y1 + ∂F)/σ, the
+        penalty √λ on the network's entries. Written out rather than pushed through ``_assemble`` by jacfwd
+        (which spent half a hybrid step on a map that is linear); the same numbers, to the bit."""
+        physics, network = self.columns["physics"], self.columns["network"]
+        samples = self.force.numel()
+        jacobian = theta.new_zeros(2 * samples + network.numel(), theta.numel())
+        jacobian[:samples, physics] = -jacobians["physics"] / self.noise[:, None]
+        jacobian[samples : 2 * samples, physics] = jacobians["physics"] / self.noise[:, None]
+        jacobian[samples : 2 * samples, network] = jacobians["network"] / self.noise[:, None]
+        jacobian[2 * samples + torch.arange(network.numel()), network] = self.regularisation**0.5
+        return jacobian
 
 
 def newton_permeability(
