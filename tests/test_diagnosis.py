@@ -115,6 +115,19 @@ class AboveFive:
 ABOVE_FIVE = AboveFive()
 
 
+class HeldOutPasses:
+    """A held-out test every larger model passes (what ``name.HeldOutTest`` gives is tested above and in test_null)."""
+
+    @staticmethod
+    def evidence(smaller, larger, label):
+        from ptwin.diagnosis.null import TermEvidence
+
+        return TermEvidence(label, 100.0, 10.0, 1.0, 0.01)
+
+
+HELD_OUT_PASSES = HeldOutPasses()
+
+
 @pytest.mark.parametrize(("max_terms", "pair_whiteness", "largest"), [(3, 50.0, 3), (3, 2.0, 2), (1, 50.0, 1)])
 def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_structure(
     monkeypatch, max_terms, pair_whiteness, largest
@@ -135,7 +148,11 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
     monkeypatch.setattr(name, "rmse", lambda *args: 1.0)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
-    samples = type("Samples", (), {"force": torch.zeros(10), "in_contact": torch.ones(10, dtype=torch.bool)})()
+    samples = type(
+        "Samples",
+        (),
+        {"force": torch.zeros(10), "in_contact": torch.ones(10, dtype=torch.bool), "noise_floor": torch.ones(10)},
+    )()
     split = Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
     name.fit_candidates(None, samples, split, ["a", "b", "c"], max_terms, 1, 50, ABOVE_FIVE, progress=lambda line: None)
     assert max(len(t) for t in fitted) == largest
@@ -166,7 +183,11 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
     monkeypatch.setattr(name, "rmse", lambda *args: 1.0)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
-    samples = type("Samples", (), {"force": torch.zeros(10), "in_contact": torch.ones(10, dtype=torch.bool)})()
+    samples = type(
+        "Samples",
+        (),
+        {"force": torch.zeros(10), "in_contact": torch.ones(10, dtype=torch.bool), "noise_floor": torch.ones(10)},
+    )()
     split = Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
     name.fit_candidates(None, samples, split, ["a", "b", "c"], 2, 1, 50, ABOVE_FIVE, progress=lambda line: None)
     assert max(len(t) for t in fitted) == largest
@@ -201,9 +222,11 @@ def test_structure_left_is_unexplained_only_where_the_hybrid_twin_predicts_bette
         (): candidate((), 2000.0, 1.0e-9, whiteness=50.0),
         ("a",): candidate(("a",), 1000.0, 0.5e-9, whiteness=8.0),  # above the test's 5: structure left
     }
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, twin_rmse, 1.0e-9, {})
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, twin_rmse, 1.0e-9, {}, HELD_OUT_PASSES)
     assert pick.structured and pick.chosen == named and pick.unexplained == (not named)
-    assert _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}).unexplained  # no witness
+    assert _select(
+        candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_PASSES
+    ).unexplained  # no witness
 
 
 def test_a_residual_within_the_noise_as_a_whole_names_a_term_it_is_not_noise_in_the_shape_of():
@@ -214,11 +237,11 @@ def test_a_residual_within_the_noise_as_a_whole_names_a_term_it_is_not_noise_in_
 
     candidates = {(): candidate((), 2000.0, 1.0e-9), ("a",): candidate(("a",), 1000.0, 0.7e-9)}
     beyond = {"a": TermEvidence("a", 120.0, 40.0, 3.0, 0.005)}
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, beyond)
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, beyond, HELD_OUT_PASSES)
     assert pick.detected and not pick.structured and pick.chosen == ("a",)
     assert "in the shape of a it is not" in pick.notes[-1]
     within = {"a": TermEvidence("a", 30.0, 40.0, 3.0, 0.005)}
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, within)
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, within, HELD_OUT_PASSES)
     assert not pick.detected and pick.preferred == ("a",)
 
 
