@@ -98,6 +98,8 @@ def test_choose_takes_the_lowest_physical_bic_then_prunes_what_does_not_pay_twic
         ("a", "b"): candidate(("a", "b"), 1050.0, 0.8, residual=noise),
     }
     assert choose(strong_pair, 10.0, held_out) == (("a", "b"), [])
+    # No validation sample to judge on: nothing is kept on the BIC alone (and nothing divides by zero).
+    assert choose(candidates, 10.0, HeldOutTest(white, np.zeros(1000, dtype=bool), 0.01))[0] == ()
 
 
 class AboveFive:

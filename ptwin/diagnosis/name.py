@@ -141,7 +141,8 @@ class HeldOutTest:
         )
         # the parameters of the terms ``larger`` adds (a nuisance a fit may free or hold is no part of them)
         parameters = max(sum(len(larger.fit.params[t]) for t in larger.terms if t not in smaller.terms), 1)
-        samples = int(self.validation.sum())
+        # no validation sample in contact (a set of a few samples): no gain, so nothing is kept on the BIC alone
+        samples = max(int(self.validation.sum()), 1)
         return term_evidence(self.test, gained, chi_square, samples, parameters, label, self.false_alarm)
 
 
