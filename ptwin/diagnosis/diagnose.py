@@ -163,7 +163,7 @@ def diagnose(
     )
     base = candidates[()]
     twin = _twin_rmse(hybrid, samples, split)
-    evidence = _shape_evidence(candidates, samples, seen, test, s.false_alarm)
+    evidence = _shape_evidence(candidates, test, s.false_alarm)
     held_out = HeldOutTest(test, torch.isin(seen, split.val).cpu().numpy(), s.false_alarm)
     pick = _select(candidates, s, test, twin["val_rmse"], noise.std, evidence, held_out)
     with torch.no_grad():
@@ -227,29 +227,24 @@ class _Selection:
         return self.structured or bool(self.chosen)
 
 
-def _shape_evidence(candidates: dict, samples: Samples, seen: torch.Tensor, test: StructureTest, false_alarm: float):
+def _shape_evidence(candidates: dict, test: StructureTest, false_alarm: float):
     """``TermEvidence`` of each usable single term over the base model, each test at ``false_alarm`` over the
     number of terms tried (so that any of them reads noise as a term at most that often)."""
-    base = candidates[()].fit
+    base = candidates[()]
     singles = {t: c for t, c in candidates.items() if len(t) == 1}
-    with torch.no_grad():
-        before = base.model(samples)[seen]
-        sigma = samples.noise_floor[seen]
-        evidence = {}
-        for (term,), c in singles.items():
-            if not c.usable:
-                continue
-            shape = ((c.fit.model(samples)[seen] - before) / sigma).cpu().numpy()
-            evidence[term] = term_evidence(
-                test,
-                shape,
-                (base.chi_square, c.fit.chi_square),
-                c.fit.samples,
-                len(c.fit.params[term]),  # the term's own: a nuisance each fit may free or hold is no part of it
-                term,
-                false_alarm / max(len(singles), 1),
-            )
-    return evidence
+    return {
+        term: term_evidence(
+            test,
+            c.residual - base.residual,  # what the term adds on the judged samples (noise units)
+            (base.fit.chi_square, c.fit.chi_square),
+            c.fit.samples,
+            len(c.fit.params[term]),  # the term's own: a nuisance each fit may free or hold is no part of it
+            term,
+            false_alarm / max(len(singles), 1),
+        )
+        for (term,), c in singles.items()
+        if c.usable
+    }
 
 
 def _select(
