@@ -5,8 +5,8 @@ removal costs less than ``bic_margin`` BIC, or less validation χ² than noise a
 error of ``MODEL_ERROR`` noise std would give it one time in ``1/false_alarm``
 (``HeldOutTest``). BIC alone admits spurious terms (a model error of a tenth of the noise
 earns any margin over thousands of samples) and held-out error alone cannot split some
-pairs, so a term must pass both. Subsets of k terms are fitted only when the best of k − 1 leaves
-structure (greedy forward selection would miss pairs whose members barely help alone;
+pairs, so a term must pass both. Subsets of k terms are fitted only when the best of k − 1
+leaves structure (greedy forward selection would miss pairs whose members barely help alone;
 fitting every pair whenever a single is not enough does not).
 """
 

@@ -136,8 +136,8 @@ class HybridResidual:
     The physics model depends on its own parameters only and the network on its own, so each is
     differentiated apart — the physics by jacfwd over its few parameters, the network by per-sample
     gradients (``ErrorNetwork.jacobian``) — and J follows by the chain rule through the residual's assembly
-    (``_assembled_jacobian``). (jacfwd over all of θ pushed the network's ~25 tangents through every sample: most of a
-    hybrid step.)
+    (``_assembled_jacobian``). (jacfwd over all of θ pushed the network's ~25 tangents through every sample:
+    most of a hybrid step.)
     """
 
     def __init__(self, twin: HybridTwin, samples: Samples, index: torch.Tensor, regularisation: float, vector):
