@@ -318,7 +318,7 @@ class ExperimentDesign:
         stride = max(1, curve.time.size // MAX_SAMPLES)
         arrays = {name: value[::stride] for name, value in vars(kinematics).items() if isinstance(value, np.ndarray)}
         kinematics = replace(kinematics, **arrays, noise=self.noise)
-        return Samples.from_curves([kinematics], self.samples.noise_inflation), stride
+        return Samples.from_curves([kinematics], self.samples.noise_inflation).to(self.samples.time.device), stride
 
 
 def curves_needed(separation: float, excess: float, recorded: float, samples: int, heldout_margin: float) -> float:

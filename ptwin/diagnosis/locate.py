@@ -38,7 +38,7 @@ class Mismatch:
 def block_means(scaled: torch.Tensor, block: int) -> torch.Tensor:
     """Means of consecutive blocks of ``block`` samples (a short tail joins the last block)."""
     count = max(scaled.numel() // block, 1)
-    edges = torch.linspace(0, scaled.numel(), count + 1).long()
+    edges = torch.linspace(0, scaled.numel(), count + 1, device=scaled.device).long()
     return torch.stack([scaled[a:b].mean() for a, b in zip(edges[:-1], edges[1:])]), edges
 
 

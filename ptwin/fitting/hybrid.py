@@ -146,7 +146,11 @@ class HybridResidual:
         self.force, self.noise = samples.force[index], samples.noise_floor[index]
         owners = [name for name, size in zip(vector.names, vector.sizes) for _ in range(size)]  # per entry of θ
         self.columns = {
-            part: torch.tensor([i for i, name in enumerate(owners) if name.startswith(f"{part}.")], dtype=torch.long)
+            part: torch.tensor(
+                [i for i, name in enumerate(owners) if name.startswith(f"{part}.")],
+                dtype=torch.long,
+                device=self.force.device,
+            )
             for part in ("physics", "network")
         }
 
@@ -192,7 +196,7 @@ class HybridResidual:
         jacobian[:samples, physics] = -jacobians["physics"] / self.noise[:, None]
         jacobian[samples : 2 * samples, physics] = jacobians["physics"] / self.noise[:, None]
         jacobian[samples : 2 * samples, network] = jacobians["network"] / self.noise[:, None]
-        jacobian[2 * samples + torch.arange(network.numel()), network] = self.regularisation**0.5
+        jacobian[2 * samples + torch.arange(network.numel(), device=network.device), network] = self.regularisation**0.5
         return jacobian
 
 

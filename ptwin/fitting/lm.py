@@ -190,7 +190,7 @@ def covariance(jacobian: torch.Tensor, residual: torch.Tensor, rcond: float = 1e
     variance = (residual @ residual) / max(n - p, 1)
     normal = jacobian.T @ jacobian
     scale = normal.diagonal().sqrt()
-    unknown = torch.full((p, p), float("nan"), dtype=normal.dtype)
+    unknown = torch.full((p, p), float("nan"), dtype=normal.dtype, device=normal.device)
     if not torch.isfinite(normal).all() or not torch.isfinite(variance):
         return unknown
     live = scale > 0

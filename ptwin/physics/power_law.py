@@ -38,7 +38,7 @@ def kernel_modes(alpha: torch.Tensor, shortest: float, longest: float):
     high = math.log(FAST_MARGIN * T0 / shortest)
     count = int(math.ceil((high - low) * PER_EFOLD))
     step = (high - low) / count
-    u = low + step * (torch.arange(count, dtype=torch.float64) + 0.5)
+    u = low + step * (torch.arange(count, dtype=torch.float64, device=alpha.device) + 0.5)
     scale = torch.exp(-torch.lgamma(1.0 + alpha))
     weights = step * alpha * torch.exp(alpha * u) * scale
     return torch.exp(alpha * low) * scale, weights, T0 * torch.exp(-u)
