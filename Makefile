@@ -23,6 +23,7 @@ bench: $(STAMP)
 	$(PY) -m bench.train_bench
 	$(PY) -m bench.map_bench
 	$(PY) bench/pgd_bench.py
+	$(PY) -m bench.device_bench
 
 discover-bench: $(STAMP)
 	$(PY) -m bench.discover_bench
