@@ -214,10 +214,12 @@ def test_holds_at_the_references_depth_are_fitted_and_one_approach_alone_is_refu
     )
     samples, law = prepared.samples, prepared.make_model.reference
     assert samples.curve_ids == ("v2h", "v8h2")
+    unresolved = torch.from_numpy(np.concatenate([curve.unresolved for curve in prepared.fitted]))
     for curve in range(2):
         hold = (samples.curve == curve) & (samples.segment == HOLD)
         assert (samples.depth[hold] > law.deepest).all()  # the whole hold lies beyond the law read off v2h ...
-        assert samples.in_contact[hold].all()  # ... and is fitted
+        assert samples.in_contact[hold & ~unresolved].all()  # ... and is fitted (but where the stop outruns
+        assert unresolved[hold].sum() <= 2  # the sampling: its first sample or two)
     assert not samples.in_contact[(samples.curve == 0) & (samples.segment == APPROACH)].any()
 
     write_recordings(tmp_path / "one", *simulate(Experiment(base_speeds=(5e-6,), samples=300)))

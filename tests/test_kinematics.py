@@ -3,9 +3,17 @@ estimated contact."""
 
 import numpy as np
 import pytest
+import scipy.signal
 import torch
 
-from ptwin.data.kinematics import PINNING_TRAVEL, contact_radius, curve_kinematics, smoothed_derivative
+from ptwin.data.kinematics import (
+    PINNING_TRAVEL,
+    UNRESOLVED_FALSE_ALARM,
+    contact_radius,
+    curve_kinematics,
+    smoothed_derivative,
+    unresolved_motion,
+)
 from ptwin.data.noise import second_difference_std
 from ptwin.data.recordings import load_recordings
 from ptwin.fitting.split import split_samples
@@ -66,3 +74,35 @@ def test_an_estimated_contact_is_pinned_by_the_free_travel_just_before_it_and_th
 def test_a_known_contact_pins_nothing(tmp_path):
     curves = curve_kinematics(load_recordings(simulated_set(tmp_path)))
     assert not any(c.pins_contact.any() for c in curves)
+
+
+def _ramp_and_hold(relaxation_time: float):
+    """Depth [m] of a tip on a 40 µm/s ramp sampled at 10 kHz that stops at 0.1 s, then held and sampled at
+    2 kHz while the cantilever relaxes (the tip's velocity decays from the ramp's with ``relaxation_time``)."""
+    time = np.concatenate([np.arange(1000) * 1e-4, 0.1 + np.arange(1, 401) * 5e-4])
+    speed, stop = 40e-6, 0.1
+    relaxing = speed * stop + speed * relaxation_time * (1 - np.exp(-(time - stop) / relaxation_time))
+    return time, np.where(time <= stop, speed * time, relaxing) - 2e-6
+
+
+def test_unresolved_motion_marks_where_a_fast_stop_outruns_the_sampling_and_nothing_else():
+    noise = 0.15e-9 * np.random.default_rng(1).standard_normal(1400)
+    time, depth = _ramp_and_hold(0.4e-3)  # relaxes within one hold sample (0.5 ms)
+    marked = unresolved_motion(time, depth + noise, np.ones(time.size, dtype=bool))
+    since = time[marked] - 0.1
+    assert marked.any() and since.min() > -2e-4 and since.max() < 2e-3
+    time, depth = _ramp_and_hold(50e-3)  # a relaxation the hold's sampling follows
+    assert not unresolved_motion(time, depth + noise, np.ones(time.size, dtype=bool)).any()
+
+
+def test_noise_alone_marks_a_curve_unresolved_about_as_often_as_stated():
+    # Gaussian noise on w, half white and half AR(1) (memory 0.7), under a resolved ramp and hold sampled at
+    # two rates: a curve gets a sample marked in about UNRESOLVED_FALSE_ALARM of the draws.
+    rng = np.random.default_rng(0)
+    time, smooth = _ramp_and_hold(50e-3)
+    draws, marked = 2000, 0
+    for _ in range(draws):
+        correlated = scipy.signal.lfilter([np.sqrt(1 - 0.7**2)], [1, -0.7], rng.standard_normal(time.size))
+        noise = 0.15e-9 * np.sqrt(0.5) * (rng.standard_normal(time.size) + correlated)
+        marked += unresolved_motion(time, smooth + noise, np.ones(time.size, dtype=bool)).any()
+    assert marked / draws < 2 * UNRESOLVED_FALSE_ALARM

@@ -8,7 +8,12 @@
   (one-sided at a segment's ends: a window shrunk to a few samples there would carry that
   velocity noise into the Darcy force, several noise std at a fast curve's deepest samples).
   Every sample of a hold is fitted: its first milliseconds are where a fast relaxation (a
-  pore pressure draining in 5–20 ms) is all there is to see.
+  pore pressure draining in 5–20 ms) is all there is to see. Except where the sampling cannot
+  resolve the velocity (``unresolved_motion``): when a fast ramp stops, the cantilever
+  relaxes in a millisecond or less, and the tip's velocity at the first samples of the hold
+  is anywhere between the ramp's and a fraction of it; the rate forces there are not fixed by
+  the recording (at 45 µm/s on a soft cantilever, four such samples 30σ off pulled a fit's K
+  by 17%). Those samples are left out of the fits.
 - Fits use the approach and the hold; a retract is kept but left out (adhesion and
   unloading are not in the vocabulary).
 - The noise of each curve (``ptwin.data.noise``): measured on its pre-contact baseline
@@ -32,12 +37,14 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+import scipy.stats
 
 from ptwin.data.contact import Baseline, NoBaseline, estimate_baseline, levels_with_speed
 from ptwin.data.noise import NoiseModel, curve_noise, with_std
 from ptwin.data.recordings import APPROACH, RETRACT, SEGMENTS, RecordingError, RecordingSet
 
 PINNING_TRAVEL = 0.25  # the last fraction of an approach's free travel, fitted with an estimated contact
+UNRESOLVED_FALSE_ALARM = 0.01  # samples of a curve that noise alone marks unresolved, expected
 
 
 @dataclass
@@ -61,10 +68,13 @@ class CurveKinematics:
     # contact (estimated contact), None without pre-contact samples
     baseline: Baseline | None  # the estimated contact and removed baseline (contact_point: estimate)
     pins_contact: np.ndarray | None = None  # bool: pre-contact samples fitted with an estimated contact
+    unresolved: np.ndarray | None = None  # bool: samples whose velocity the sampling does not resolve
 
     def __post_init__(self):
         if self.pins_contact is None:
             self.pins_contact = np.zeros_like(self.in_contact)
+        if self.unresolved is None:
+            self.unresolved = np.zeros_like(self.in_contact)
 
     @property
     def noise_floor(self) -> float:
@@ -131,6 +141,35 @@ def smoothed_derivative(time: np.ndarray, values: np.ndarray, window: int, growi
     return window_line(time, values, lo, hi, time)[1]
 
 
+def unresolved_motion(time: np.ndarray, depth: np.ndarray, tested: np.ndarray) -> np.ndarray:
+    """Samples (of ``tested``, time-ordered) where the tip's velocity changes within the sampling by more
+    than noise explains: the second divided difference of w at each sample, in units of what white noise on
+    w gives it (sampling rates may differ between segments), beyond what noise alone exceeds
+    ``UNRESOLVED_FALSE_ALARM`` times a curve. The noise's scale is the median absolute deviation over the
+    curve (robust to the few samples looked for; it carries the force's noise through w = z − F/k_s and the
+    base's own), so Gaussian noise marks a sample with probability ``UNRESOLVED_FALSE_ALARM``/N. At such a
+    sample the instantaneous velocity, and the rate force on it, lies anywhere between the one-sided slopes
+    on either side."""
+    index = np.flatnonzero(tested)
+    unresolved = np.zeros_like(tested)
+    if index.size < 5:
+        return unresolved
+    w = depth[index]
+    before, after = np.diff(time[index])[:-1], np.diff(time[index])[1:]
+    inner = (before > 0) & (after > 0)
+    before, after = np.where(inner, before, 1.0), np.where(inner, after, 1.0)
+    # w_{j−1}, w_j, w_{j+1} weighted as the divided difference weighs them, scaled to unit norm
+    weights = np.stack([1 / (before * (before + after)), -1 / (before * after), 1 / (after * (before + after))])
+    weights /= np.sqrt((weights**2).sum(axis=0))
+    scaled = np.where(inner, (weights * np.stack([w[:-2], w[1:-1], w[2:]])).sum(axis=0), 0.0)
+    typical = np.median(np.abs(scaled[inner] - np.median(scaled[inner]))) / 0.6745  # σ from the MAD
+    if not typical > 0:
+        return unresolved
+    limit = scipy.stats.norm.isf(UNRESOLVED_FALSE_ALARM / (2 * inner.sum())) * typical
+    unresolved[index[1:-1]] = inner & (np.abs(scaled) > limit)
+    return unresolved
+
+
 def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: int = 50) -> list[CurveKinematics]:
     """Kinematics of every curve of a recording set, in file order; ``block``: the block length [samples]
     of the noise model's variance inflation (the whiteness test's)."""
@@ -172,6 +211,8 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
                 baseline_offset=offset,
                 baseline=baseline,
                 pins_contact=pre_contact & ~free & (z >= -depth.max()) if baseline is not None else None,
+                # A noise-free curve (a simulation's) gives no scale to judge by: nothing is left out.
+                unresolved=unresolved_motion(time, depth, segment != RETRACT) if noise.std > 0 else None,
             )
         )
     return result

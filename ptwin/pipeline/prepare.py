@@ -167,6 +167,15 @@ def _fitted_curves(recordings: RecordingSet, curves, reference, law: ReferenceCu
                 f"a creep) are left out of the fits."
             )
             curve = replace(curve, in_contact=curve.in_contact & ~beyond)
+        unresolved = curve.in_contact & curve.unresolved
+        if unresolved.any():
+            times = curve.time[unresolved]
+            notes.append(
+                f"{curve.curve}: {int(unresolved.sum())} samples where the tip's velocity changes faster than the "
+                f"sampling resolves (at {times.min():.4g} to {times.max():.4g} s: the rate forces there are not fixed "
+                f"by the recording) are left out of the fits."
+            )
+            curve = replace(curve, in_contact=curve.in_contact & ~unresolved)
         continued = curve.in_contact & (curve.depth > law.deepest)
         if continued.any():
             further = (curve.depth[continued].max() - law.deepest) * 1e9
