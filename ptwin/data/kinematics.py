@@ -7,13 +7,13 @@
   stay within a segment (approach, hold, retract), so the ramp/hold corner is not smeared
   (one-sided at a segment's ends: a window shrunk to a few samples there would carry that
   velocity noise into the Darcy force, several noise std at a fast curve's deepest samples).
-  Every sample of a hold is fitted: its first milliseconds are where a fast relaxation (a
-  pore pressure draining in 5–20 ms) is all there is to see. Except where the sampling cannot
-  resolve the velocity (``unresolved_motion``): when a fast ramp stops, the cantilever
+  Every sample of a hold is fitted, its first milliseconds too (a pore pressure draining in
+  5–20 ms is all there is to see there), but for the samples whose velocity the sampling
+  cannot resolve (``unresolved_motion``): when a fast ramp stops, the cantilever
   relaxes in a millisecond or less, and the tip's velocity at the first samples of the hold
-  is anywhere between the ramp's and a fraction of it; the rate forces there are not fixed by
-  the recording (at 45 µm/s on a soft cantilever, four such samples 30σ off pulled a fit's K
-  by 17%). Those samples are left out of the fits.
+  is anywhere between the ramp's and a fraction of it, so the rate forces there are not fixed
+  by the recording (at 45 µm/s on a soft cantilever, four such samples 30σ off pulled a fit's
+  K by 17%). Those are left out of the fits.
 - Fits use the approach and the hold; a retract is kept but left out (adhesion and
   unloading are not in the vocabulary).
 - The noise of each curve (``ptwin.data.noise``): measured on its pre-contact baseline

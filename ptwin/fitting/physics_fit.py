@@ -245,7 +245,7 @@ def fit_with_starts(make_model, terms: tuple[str, ...], samples: Samples, index:
     (χ² 2424 from the default K against 2428 with the fluid off, whose whole fit reaches 2121 with γ 4.6).
 
     ``make_model(terms, values, permeability=None)`` builds a fresh ``ForceModel``. Starts the model cannot
-    evaluate or settle are skipped; ``FitError`` (the last reason) if none can be.
+    evaluate or fit are skipped; ``FitError`` (the last reason) if none can be.
     """
     if not terms:
         return fit_physics(make_model(terms), samples, index, iterations)

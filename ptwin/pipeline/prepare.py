@@ -169,11 +169,11 @@ def _fitted_curves(recordings: RecordingSet, curves, reference, law: ReferenceCu
             curve = replace(curve, in_contact=curve.in_contact & ~beyond)
         unresolved = curve.in_contact & curve.unresolved
         if unresolved.any():
-            times = curve.time[unresolved]
+            first, last = (f"{t:.4g}" for t in (curve.time[unresolved].min(), curve.time[unresolved].max()))
             notes.append(
                 f"{curve.curve}: {int(unresolved.sum())} samples where the tip's velocity changes faster than the "
-                f"sampling resolves (at {times.min():.4g} to {times.max():.4g} s: the rate forces there are not fixed "
-                f"by the recording) are left out of the fits."
+                f"sampling resolves (at {first if first == last else f'{first} to {last}'} s: the rate forces there "
+                f"are not fixed by the recording) are left out of the fits."
             )
             curve = replace(curve, in_contact=curve.in_contact & ~unresolved)
         continued = curve.in_contact & (curve.depth > law.deepest)
