@@ -293,6 +293,8 @@ def detection_section(term: str, strength: str, trials: list[Trial], native: flo
     if named:
         smallest = f"The smallest {strength} named: {named[0].added:.3g} (peak {named[0].peak:.1f}× the noise std)."
     else:
-        missed = f"these recordings do not show {term} at {strength} up to {trials[-1].added:.3g}"
-        smallest = f"No size tried was named: {no_candidate(term, trials, listed) or missed}."
+        # Not "the recordings do not show it": a term fitted alone near its size can still be left unnamed.
+        reason = no_candidate(term, trials, listed)
+        tried = f"No size tried was named ({strength} up to {trials[-1].added:.3g})"
+        smallest = f"{tried}: {reason}." if reason else f"{tried}."
     return [*lines, "", smallest]
