@@ -11,7 +11,6 @@ GPU; without one this prints one line and stops.
 from __future__ import annotations
 
 import os
-import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -19,11 +18,9 @@ from pathlib import Path
 import torch
 from hydra import compose, initialize_config_dir
 
-from bench.map_bench import generated_map
-from bench.map_bench import settings as map_settings
+from bench.map_bench import generated_map, timed_map
 from ptwin.app import register, typed
 from ptwin.fitting.hybrid_training import train_hybrid
-from ptwin.pipeline.forcemap import run_map
 from ptwin.pipeline.identify import identify
 from ptwin.pipeline.prepare import prepare
 
@@ -70,10 +67,7 @@ def hybrid_stage(device: str, cache: Path, report: bool = True) -> None:
 def local_map(cache: Path) -> None:
     folder, truth = generated_map(cache)
     cores = os.cpu_count()
-    with tempfile.TemporaryDirectory() as out:
-        started = time.perf_counter()
-        result = run_map(map_settings(folder, cache, "map.scheduler=local"), Path(out), progress=lambda line: None)
-        wall = time.perf_counter() - started
+    result, wall = timed_map(folder, cache, "map.scheduler=local")
     print(
         f"  Dask LocalCluster, {cores} workers, spots on the CPU: {wall:.0f} s wall, "
         f"{wall * cores / len(truth):.2f} core-seconds per spot; {_outcome(result.table)}",
@@ -82,16 +76,10 @@ def local_map(cache: Path) -> None:
 
 
 def serial_spots(cache: Path) -> None:
-    folder, truth = generated_map(cache)
+    folder = generated_map(cache)[0]
     tables = {}
     for device in ("cpu", "cuda"):
-        with tempfile.TemporaryDirectory() as sample, tempfile.TemporaryDirectory() as out:
-            for spot in truth["spot"].iloc[:: len(truth) // SERIAL_SPOTS][:SERIAL_SPOTS]:
-                os.symlink(folder / spot, Path(sample) / spot)
-            started = _synchronised()
-            overrides = ("map.scheduler=serial", f"device={device}")
-            serial = run_map(map_settings(Path(sample), cache, *overrides), Path(out), progress=lambda line: None)
-            wall = _synchronised() - started
+        serial, wall = timed_map(folder, cache, "map.scheduler=serial", f"device={device}", spots=SERIAL_SPOTS)
         tables[device] = serial.table.set_index("spot")
         print(
             f"  serially, device={device}, {SERIAL_SPOTS} of its spots: {wall / SERIAL_SPOTS:.2f} s per spot; "

@@ -22,7 +22,7 @@ import pandas as pd
 from hydra import compose, initialize_config_dir
 
 from ptwin.app import register, typed
-from ptwin.pipeline.forcemap import run_map
+from ptwin.pipeline.forcemap import MapResult, run_map
 from ptwin.synth.cli import main as synth
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,22 +49,28 @@ def settings(folder: Path, cache: Path, *overrides):
         return typed(compose("map", [f"data.path={folder}", f"cache_dir={cache}", *overrides]))
 
 
+def timed_map(folder: Path, cache: Path, *overrides: str, spots: int | None = None) -> tuple[MapResult, float]:
+    """The map in ``folder`` (or ``spots`` of its spots, spread evenly over it) run with ``overrides`` into a
+    scratch folder, and the wall time it took [s]."""
+    with tempfile.TemporaryDirectory() as sample, tempfile.TemporaryDirectory() as out:
+        if spots is not None:
+            names = sorted(spot.name for spot in folder.iterdir() if spot.is_dir())
+            for name in names[:: len(names) // spots][:spots]:
+                os.symlink(folder / name, Path(sample) / name)
+            folder = Path(sample)
+        started = time.perf_counter()
+        result = run_map(settings(folder, cache, *overrides), Path(out), progress=lambda line: None)
+        return result, time.perf_counter() - started
+
+
 def main() -> None:
     warnings.filterwarnings("ignore", category=RuntimeWarning)
     cache = Path(os.environ.get("PTWIN_CACHE", ROOT / ".cache" / "ptwin"))
     folder, truth = generated_map(cache)
     cores = os.cpu_count()
-    with tempfile.TemporaryDirectory() as out:
-        started = time.perf_counter()
-        result = run_map(settings(folder, cache, "map.scheduler=local"), Path(out), progress=lambda line: None)
-        wall = time.perf_counter() - started
+    result, wall = timed_map(folder, cache, "map.scheduler=local")
     table = result.table.merge(truth, on="spot", suffixes=("", "_true"))
-    with tempfile.TemporaryDirectory() as sample, tempfile.TemporaryDirectory() as out:
-        for spot in truth["spot"].iloc[:: len(truth) // SERIAL_SAMPLE][:SERIAL_SAMPLE]:
-            os.symlink(folder / spot, Path(sample) / spot)
-        started = time.perf_counter()
-        serial = run_map(settings(Path(sample), cache, "map.scheduler=serial"), Path(out), progress=lambda line: None)
-        serial_wall = time.perf_counter() - started
+    serial, serial_wall = timed_map(folder, cache, "map.scheduler=serial", spots=SERIAL_SAMPLE)
     ok = table[table["status"] == "ok"]
     error = (ok["permeability"] / ok["permeability_true"] - 1).abs()
     named = ok["left_out"].fillna("").str.contains(TERM) & ok["confidence"].fillna("").str.contains("strong|moderate")
