@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.stats
 
-from ptwin.data.noise import fit_correlation, model_inflation
+from ptwin.data.noise import fit_correlation, model_inflation, robust_std
 
 DEPARTURE = 5.0  # robust standard deviations above the first baseline where contact has begun
 SCAN = 101  # candidate contact depths per grid of the refinement
@@ -73,7 +73,7 @@ def estimate_baseline(z: np.ndarray, force: np.ndarray, spring_constant: float) 
         raise NoBaseline("fewer than 10 samples in the first fifth of the travel")
     tilt, intercept = np.polyfit(z[first], force[first], 1)
     excess = force - (intercept + tilt * z)
-    spread = 1.4826 * np.median(np.abs(excess[first] - np.median(excess[first])))
+    spread = robust_std(excess[first])
     below = np.flatnonzero(excess <= DEPARTURE * spread)
     guess = int(below[-1]) + 1 if below.size else 0
     free = z <= z[0] + 0.75 * (z[min(guess, z.size - 1)] - z[0])

@@ -40,7 +40,7 @@ import pandas as pd
 import scipy.stats
 
 from ptwin.data.contact import Baseline, NoBaseline, estimate_baseline, levels_with_speed
-from ptwin.data.noise import NoiseModel, curve_noise, with_std
+from ptwin.data.noise import NoiseModel, curve_noise, robust_std, with_std
 from ptwin.data.recordings import APPROACH, RETRACT, SEGMENTS, RecordingError, RecordingSet
 
 PINNING_TRAVEL = 0.25  # the last fraction of an approach's free travel, fitted with an estimated contact
@@ -162,7 +162,7 @@ def unresolved_motion(time: np.ndarray, depth: np.ndarray, tested: np.ndarray) -
     weights = np.stack([1 / (before * (before + after)), -1 / (before * after), 1 / (after * (before + after))])
     weights /= np.sqrt((weights**2).sum(axis=0))
     scaled = np.where(inner, (weights * np.stack([w[:-2], w[1:-1], w[2:]])).sum(axis=0), 0.0)
-    typical = np.median(np.abs(scaled[inner] - np.median(scaled[inner]))) / 0.6745  # σ from the MAD
+    typical = robust_std(scaled[inner])
     if not typical > 0:
         return unresolved
     limit = scipy.stats.norm.isf(UNRESOLVED_FALSE_ALARM / (2 * inner.sum())) * typical

@@ -223,10 +223,14 @@ def _detrended(z: np.ndarray, force: np.ndarray) -> np.ndarray:
     return force - design @ coefficients
 
 
+def robust_std(values: np.ndarray) -> float:
+    """σ of Gaussian ``values`` from their median absolute deviation, 1.4826·MAD: a few outliers leave it be."""
+    return 1.4826 * float(np.median(np.abs(values - np.median(values))))
+
+
 def second_difference_std(force: np.ndarray) -> float:
     """σ of white force noise from second differences (robust MAD): 1.4826·MAD/√6."""
-    second = np.diff(force, 2)
-    return float(1.4826 * np.median(np.abs(second - np.median(second))) / np.sqrt(6.0))
+    return robust_std(np.diff(force, 2)) / np.sqrt(6.0)
 
 
 def curve_noise(time, z, force, baseline: np.ndarray, block: int) -> NoiseModel:
