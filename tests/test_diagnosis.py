@@ -195,6 +195,66 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
     assert max(len(t) for t in fitted) == largest
 
 
+@pytest.mark.parametrize(("single_chi_square", "largest"), [(1980.0, 1), (1000.0, 2)])
+def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_term_beats_it_by_the_bic_margin(
+    monkeypatch, single_chi_square, largest
+):
+    """No structure anywhere (W 2 against 5): a single term 686 BIC better than the base model is something the
+    information criterion sees and the whole-residual test cannot prove, so the pairs it may be half of are
+    fitted, and only those; at 3 BIC better, as the other two are, it is not."""
+    import torch
+
+    import ptwin.diagnosis.name as name
+
+    fitted = []
+
+    def fit_with_starts(make_model, subset, samples, index, iterations):
+        fitted.append(subset)
+        chi_square = {(): 2000.0, ("a",): single_chi_square, ("b",): 1980.0, ("c",): 1980.0}.get(subset, 900.0)
+        fit = candidate(subset, chi_square, 1.0).fit
+        fit.model = lambda samples: samples.force + len(subset)
+        return fit
+
+    monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
+    monkeypatch.setattr(name, "rmse", lambda *args: 1.0)
+    monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: 2.0)
+    samples = type(
+        "Samples",
+        (),
+        {"force": torch.zeros(10), "in_contact": torch.ones(10, dtype=torch.bool), "noise_floor": torch.ones(10)},
+    )()
+    split = Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
+    name.fit_candidates(
+        None, samples, split, ["a", "b", "c"], 2, 1, 50, ABOVE_FIVE, lambda line: None, None, bic_margin=10.0
+    )
+    assert [t for t in fitted if len(t) == 2] == [("a", "b"), ("a", "c")][: 2 * (largest - 1)]
+
+
+def test_a_pair_is_named_by_its_own_shape_only_where_no_single_term_is():
+    # W passes; neither term alone is beyond the noise in its shape, the pair is: named together. With a beyond
+    # on its own, the single term is named and the pair is not weighed.
+    from ptwin.diagnosis.diagnose import DiagnosisSettings, _select
+    from ptwin.diagnosis.null import TermEvidence
+
+    candidates = {
+        (): candidate((), 2000.0, 1.0e-9),
+        ("a",): candidate(("a",), 1500.0, 0.9e-9),
+        ("b",): candidate(("b",), 1900.0, 1.0e-9),
+        ("a", "b"): candidate(("a", "b"), 1000.0, 0.6e-9),
+    }
+    evidence = {
+        "a": TermEvidence("a", 30.0, 40.0, 3.0, 0.005),
+        "b": TermEvidence("b", 5.0, 40.0, 3.0, 0.005),
+        "a + b": TermEvidence("a + b", 90.0, 60.0, 3.0, 0.01),
+    }
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, evidence, HELD_OUT_PASSES)
+    assert pick.detected and not pick.structured and pick.chosen == ("a", "b")
+    assert "in the shape of a + b it is not" in pick.notes[-1]
+    evidence["a"] = TermEvidence("a", 50.0, 40.0, 3.0, 0.005)
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, evidence, HELD_OUT_PASSES)
+    assert pick.chosen == ("a",)
+
+
 def test_a_term_named_below_strong_carries_the_experiment_that_would_make_it_strong():
     # Contract v2.3: the design is asked to separate the named set from the set without the term.
     from ptwin.diagnosis.diagnose import _make_strong

@@ -144,6 +144,26 @@ def test_a_terms_gain_on_noise_alone_is_chi_square_whatever_the_correlation():
     assert all(e.beyond for e in _term_draws(test, shape, draws, 3 * tolerated))
 
 
+def test_a_pairs_joint_gain_on_noise_alone_is_chi_square_of_two():
+    # What diagnose tests a pair by: the two shapes fitted together to noise alone, the gain over λ along what the
+    # fit adds (a direction that changes from draw to draw) read against χ²(2): mean 2, exceeded by 4.61 one time in
+    # ten, and beyond noise and model error never.
+    from ptwin.diagnosis.null import term_evidence
+
+    test, shape, draws = _smooth_term_in_ar_noise(np.random.default_rng(17), 800)
+    shapes = np.stack([shape, np.linspace(0.0, 1.0, shape.size) ** 2 * np.sqrt(np.abs(shape))], axis=1)
+    fitted = shapes @ np.linalg.lstsq(shapes, draws, rcond=None)[0]  # what the pair adds, per draw
+    totals = np.sum(draws**2, axis=0)
+    evidence = [
+        term_evidence(test, added, (t, t - added @ added), shape.size, 2, "a + b", 0.1)
+        for added, t in zip(fitted.T, totals)
+    ]
+    gains = np.array([e.gain for e in evidence])
+    assert gains.mean() == pytest.approx(2.0, abs=0.3)  # sd of the mean of 800 χ²(2): 0.07
+    assert np.mean(gains > 4.605) == pytest.approx(0.1, abs=0.04)
+    assert not any(e.beyond for e in evidence)
+
+
 def _held_out_draws(test, shape, noise_draws, validation, error):
     """``HeldOutTest`` evidence of a one-parameter term of ``shape`` (noise units) fitted by least squares on the
     samples outside ``validation`` to each column of ``noise_draws`` + the model error ``error``, the smaller

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import collections
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -84,7 +85,7 @@ class Diagnosis:
     permeability: dict  # base, corrected, corrected_std, corrected_interval [m²]
     notes: list[str] = field(default_factory=list)
     predictions: list[Prediction] = field(default_factory=list)  # of each proposed next experiment
-    evidence: dict[str, TermEvidence] = field(default_factory=dict)  # of each single term over the base model
+    evidence: dict[str, TermEvidence] = field(default_factory=dict)  # of each usable subset over the base model
 
     @property
     def base(self) -> Candidate:
@@ -159,7 +160,7 @@ def diagnose(
     progress("diagnosis: fitting the base model and the candidate terms (K refitted with each)")
     fitted = {(): base_fit} if base_fit is not None else None
     candidates = fit_candidates(
-        make_model, samples, split, s.terms, s.max_terms, iterations, s.block, test, progress, fitted
+        make_model, samples, split, s.terms, s.max_terms, iterations, s.block, test, progress, fitted, s.bic_margin
     )
     base = candidates[()]
     twin = _twin_rmse(hybrid, samples, split)
@@ -227,23 +228,25 @@ class _Selection:
         return self.structured or bool(self.chosen)
 
 
-def _shape_evidence(candidates: dict, test: StructureTest, false_alarm: float):
-    """``TermEvidence`` of each usable single term over the base model, each test at ``false_alarm`` over the
-    number of terms tried (so that any of them reads noise as a term at most that often)."""
+def _shape_evidence(candidates: dict, test: StructureTest, false_alarm: float) -> dict[str, TermEvidence]:
+    """``TermEvidence`` of each usable subset over the base model, by its label (``' + '.join(terms)``); each
+    test at ``false_alarm`` over the number of subsets of its size tried, so that the single terms read noise
+    as a term at most that often, and the pairs (fitted only where no single is enough) at most that often."""
     base = candidates[()]
-    singles = {t: c for t, c in candidates.items() if len(t) == 1}
+    tried = collections.Counter(len(t) for t in candidates if t)
     return {
-        term: term_evidence(
+        " + ".join(terms): term_evidence(
             test,
-            c.residual - base.residual,  # what the term adds on the judged samples (noise units)
+            c.residual - base.residual,  # what the subset adds on the judged samples (noise units)
             (base.fit.chi_square, c.fit.chi_square),
             c.fit.samples,
-            len(c.fit.params[term]),  # the term's own: a nuisance each fit may free or hold is no part of it
-            term,
-            false_alarm / max(len(singles), 1),
+            # the terms' own parameters: a nuisance each fit may free or hold is no part of them
+            sum(len(c.fit.params[term]) for term in terms),
+            " + ".join(terms),
+            false_alarm / tried[len(terms)],
         )
-        for (term,), c in singles.items()
-        if c.usable
+        for terms, c in candidates.items()
+        if terms and c.usable
     }
 
 
@@ -288,12 +291,16 @@ def _select(
                 f"({test.words(corrected.whiteness)}): not claimed"
             )
         return _Selection(True, unexplained=True, notes=notes)
-    if any(e.beyond for e in evidence.values()):
-        chosen, notes = choose({t: c for t, c in candidates.items() if len(t) <= 1}, s.bic_margin, held_out)
-        if chosen and evidence[chosen[0]].beyond:
+    proven = [label for label, e in evidence.items() if e.beyond]
+    if proven:
+        # the fewest terms whose own shape is beyond the noise: a pair is weighed only where no single is
+        size = min(label.count(" + ") + 1 for label in proven)
+        chosen, notes = choose({t: c for t, c in candidates.items() if len(t) <= size}, s.bic_margin, held_out)
+        shape = evidence.get(" + ".join(chosen))
+        if shape is not None and shape.beyond:
             notes.append(
                 f"The residual as a whole is within the noise ({test.words(base.whiteness)}), but in the shape of "
-                f"{chosen[0]} it is not: {evidence[chosen[0]].words()}"
+                f"{shape.term} it is not: {shape.words()}"
             )
             return _Selection(False, chosen, notes=notes)
     better = [c for t, c in candidates.items() if len(t) == 1 and c.usable and base.fit.bic - c.fit.bic >= s.bic_margin]

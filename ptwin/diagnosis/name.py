@@ -7,7 +7,11 @@ error of ``MODEL_ERROR`` noise std would give it one time in ``1/false_alarm``
 earns any margin over thousands of samples) and held-out error alone cannot split some
 pairs, so a term must pass both. Subsets of k terms are fitted only when the best of k − 1
 leaves structure (greedy forward selection would miss pairs whose members barely help alone;
-fitting every pair whenever a single is not enough does not).
+fitting every pair whenever a single is not enough does not). Where the base model's residual
+passes for noise, the subsets of k − 1 that beat every smaller one by the BIC margin are grown
+by one term each: the information criterion sees something in them that the whole-residual
+test, on few baseline blocks, cannot prove, and a single term short of its own shape evidence
+may be half of a pair that has it (``diagnose``: each subset's shape evidence).
 """
 
 from __future__ import annotations
@@ -75,10 +79,13 @@ def fit_candidates(
     test: StructureTest,
     progress: Callable[[str], None] = print,
     fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
+    bic_margin: float = math.inf,
 ) -> dict[tuple[str, ...], Candidate]:
     """Fits of the base model, every single term and, while the best usable subset of k − 1 terms (none
     usable: the best smaller one) leaves structure, every subset of k ≤ ``max_terms`` terms, on the train
-    split. A fit that fails is kept with its reason (``Candidate.failure``) and left out of every choice.
+    split; with the base model's residual within the noise, also the subsets of k that contain one of k − 1
+    beating every smaller one by ``bic_margin`` (the module docstring). A fit that fails is kept with its reason
+    (``Candidate.failure``) and left out of every choice.
 
     ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are.
     """
@@ -94,16 +101,27 @@ def fit_candidates(
         progress(f"  {name:<55s} {figures:<37s}  ({candidate.state})")
 
     add(())
+    base_within_noise = not candidates[()].leaves_structure(test)
     for size in range(1, max_terms + 1):
         # The best usable subset one term smaller (none usable: the best smaller one, the base model at least).
         previous = [c for t, c in candidates.items() if len(t) == size - 1 and c.usable]
         previous = previous or [c for t, c in candidates.items() if len(t) < size and c.usable]
         best = min(previous, key=lambda c: c.fit.bic, default=None)
+        grown = list(itertools.combinations(terms, size))
         if size > 1 and best is not None and not best.leaves_structure(test):
-            break
-        for subset in itertools.combinations(terms, size):
+            preferred = _preferred(candidates, size - 1, bic_margin) if base_within_noise else []
+            grown = [subset for subset in grown if any(set(p) <= set(subset) for p in preferred)]
+            if not grown:
+                break
+        for subset in grown:
             add(subset)
     return candidates
+
+
+def _preferred(candidates: dict, size: int, bic_margin: float) -> list[tuple[str, ...]]:
+    """The usable subsets of ``size`` terms that beat every usable smaller subset by ``bic_margin``."""
+    smaller = min((c.fit.bic for t, c in candidates.items() if len(t) < size and c.usable), default=math.inf)
+    return [t for t, c in candidates.items() if len(t) == size and c.usable and c.fit.bic <= smaller - bic_margin]
 
 
 def _candidate(subset, fit, make_model, samples, split, seen, iterations, block) -> Candidate:

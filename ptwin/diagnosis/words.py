@@ -136,12 +136,11 @@ def _record(group: dict) -> str:
 
 def _where(d, ratio: float, test) -> str:
     if not test.structured(d.whiteness["base"]):  # named by a term's own shape (``null.TermEvidence``)
-        shaped = [d.evidence[e["term"]] for e in d.left_out if e["term"] in d.evidence]
+        shaped = d.evidence[" + ".join(d.chosen)]
+        what = "one term" if len(d.chosen) == 1 else "these terms together"
         return (
             f"The base model misses the curves by {ratio:.1f}× the noise std. The residual as a whole passes for "
-            f"noise ({test.words(d.whiteness['base'])}), but not in the shape of one term: "
-            + "; ".join(e.words() for e in shaped)
-            + ". "
+            f"noise ({test.words(d.whiteness['base'])}), but not in the shape of {what}: {shaped.words()}. "
         )
     if not d.where:
         return (
