@@ -195,16 +195,27 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
     assert max(len(t) for t in fitted) == largest
 
 
-@pytest.mark.parametrize(("single_chi_square", "largest"), [(1980.0, 1), (1000.0, 2)])
+@pytest.mark.parametrize(
+    ("single_chi_square", "single_beyond", "single_permeability", "largest"),
+    [(1980.0, False, 3e-16, 1), (1000.0, False, 3e-16, 2), (1000.0, True, 3e-16, 1), (1000.0, False, 1e25, 1)],
+)
 def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_term_beats_it_by_the_bic_margin(
-    monkeypatch, single_chi_square, largest
+    monkeypatch, single_chi_square, single_beyond, single_permeability, largest
 ):
     """No structure anywhere (W 2 against 5): a single term 686 BIC better than the base model is something the
     information criterion sees and the whole-residual test cannot prove, so the pairs it may be half of are
-    fitted, and only those; at 3 BIC better, as the other two are, it is not."""
+    fitted, and only those; at 3 BIC better, as the other two are, it is not; nor where the term is beyond the
+    noise in its own shape (it is named alone), nor where its fit ran K to 1e25 m² (a degenerate
+    parametrisation, as one ramp-and-hold curve lets strain_dependent_permeability make)."""
     import torch
 
     import ptwin.diagnosis.name as name
+    from ptwin.diagnosis.null import TermEvidence
+
+    gain = 50.0 if single_beyond else 5.0
+    monkeypatch.setattr(
+        name, "shape_evidence", lambda candidates, test: {"a": TermEvidence("a", gain, 40.0, 1.0, 0.01)}
+    )
 
     fitted = []
 
@@ -212,6 +223,7 @@ def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_te
         fitted.append(subset)
         chi_square = {(): 2000.0, ("a",): single_chi_square, ("b",): 1980.0, ("c",): 1980.0}.get(subset, 900.0)
         fit = candidate(subset, chi_square, 1.0).fit
+        fit.permeability = single_permeability if subset == ("a",) else 3e-16
         fit.model = lambda samples: samples.force + len(subset)
         return fit
 

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import collections
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -15,14 +14,13 @@ from ptwin.diagnosis.confidence import Grade, HeldOut, grade, held_out_curves
 from ptwin.diagnosis.design import MAX_REPEATS, ExperimentDesign, Prediction
 from ptwin.diagnosis.intervals import profile_interval, within
 from ptwin.diagnosis.locate import Mismatch, locate
-from ptwin.diagnosis.name import Candidate, HeldOutTest, choose, confounded, fit_candidates, rejected
+from ptwin.diagnosis.name import Candidate, HeldOutTest, choose, confounded, fit_candidates, rejected, shape_evidence
 from ptwin.diagnosis.null import (
     MODEL_ERROR,
     StructureTest,
     TermEvidence,
     beyond_model_error,
     structure_test,
-    term_evidence,
 )
 from ptwin.diagnosis.words import MATERIAL, finite_or_none, summarise
 from ptwin.fitting.hybrid import HybridTwin
@@ -164,7 +162,7 @@ def diagnose(
     )
     base = candidates[()]
     twin = _twin_rmse(hybrid, samples, split)
-    evidence = _shape_evidence(candidates, test, s.false_alarm)
+    evidence = shape_evidence(candidates, test)
     held_out = HeldOutTest(test, torch.isin(seen, split.val).cpu().numpy(), s.false_alarm)
     pick = _select(candidates, s, test, twin["val_rmse"], noise.std, evidence, held_out)
     with torch.no_grad():
@@ -226,28 +224,6 @@ class _Selection:
     @property
     def detected(self) -> bool:
         return self.structured or bool(self.chosen)
-
-
-def _shape_evidence(candidates: dict, test: StructureTest, false_alarm: float) -> dict[str, TermEvidence]:
-    """``TermEvidence`` of each usable subset over the base model, by its label (``' + '.join(terms)``); each
-    test at ``false_alarm`` over the number of subsets of its size tried, so that the single terms read noise
-    as a term at most that often, and the pairs (fitted only where no single is enough) at most that often."""
-    base = candidates[()]
-    tried = collections.Counter(len(t) for t in candidates if t)
-    return {
-        " + ".join(terms): term_evidence(
-            test,
-            c.residual - base.residual,  # what the subset adds on the judged samples (noise units)
-            (base.fit.chi_square, c.fit.chi_square),
-            c.fit.samples,
-            # the terms' own parameters: a nuisance each fit may free or hold is no part of them
-            sum(len(c.fit.params[term]) for term in terms),
-            " + ".join(terms),
-            false_alarm / tried[len(terms)],
-        )
-        for terms, c in candidates.items()
-        if terms and c.usable
-    }
 
 
 def _select(

@@ -8,14 +8,16 @@ earns any margin over thousands of samples) and held-out error alone cannot spli
 pairs, so a term must pass both. Subsets of k terms are fitted only when the best of k − 1
 leaves structure (greedy forward selection would miss pairs whose members barely help alone;
 fitting every pair whenever a single is not enough does not). Where the base model's residual
-passes for noise, the subsets of k − 1 that beat every smaller one by the BIC margin are grown
-by one term each: the information criterion sees something in them that the whole-residual
-test, on few baseline blocks, cannot prove, and a single term short of its own shape evidence
-may be half of a pair that has it (``diagnose``: each subset's shape evidence).
+passes for noise and no subset is beyond it in its own shape (``shape_evidence``), the subsets
+of k − 1 that beat every smaller one by the BIC margin at values the field has are grown by one
+term each: the information criterion sees something in them that the whole-residual test, on
+few baseline blocks, cannot prove, and a single term short of its own shape evidence may be
+half of a pair that has it.
 """
 
 from __future__ import annotations
 
+import collections
 import itertools
 import math
 from collections.abc import Callable
@@ -83,8 +85,9 @@ def fit_candidates(
 ) -> dict[tuple[str, ...], Candidate]:
     """Fits of the base model, every single term and, while the best usable subset of k − 1 terms (none
     usable: the best smaller one) leaves structure, every subset of k ≤ ``max_terms`` terms, on the train
-    split; with the base model's residual within the noise, also the subsets of k that contain one of k − 1
-    beating every smaller one by ``bic_margin`` (the module docstring). A fit that fails is kept with its reason
+    split; with the base model's residual within the noise and no subset beyond it in its own shape, also the
+    subsets of k that contain one of k − 1 beating every smaller one by ``bic_margin`` (the module docstring).
+    A fit that fails is kept with its reason
     (``Candidate.failure``) and left out of every choice.
 
     ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are.
@@ -110,6 +113,8 @@ def fit_candidates(
         grown = list(itertools.combinations(terms, size))
         if size > 1 and best is not None and not best.leaves_structure(test):
             preferred = _preferred(candidates, size - 1, bic_margin) if base_within_noise else []
+            if preferred and any(e.beyond for e in shape_evidence(candidates, test).values()):
+                preferred = []  # a smaller subset is beyond the noise in its own shape: the larger are not weighed
             grown = [subset for subset in grown if any(set(p) <= set(subset) for p in preferred)]
             if not grown:
                 break
@@ -118,10 +123,38 @@ def fit_candidates(
     return candidates
 
 
+def shape_evidence(candidates: dict, test: StructureTest) -> dict[str, TermEvidence]:
+    """``TermEvidence`` of each usable subset over the base model, by its label (``' + '.join(terms)``); each
+    test at the structure test's false-alarm rate over the number of subsets of its size tried, so that the
+    single terms read noise as a term at most that often, and the pairs (fitted only where no single is beyond
+    the noise in its own shape) at most that often."""
+    base = candidates[()]
+    tried = collections.Counter(len(t) for t in candidates if t)
+    return {
+        " + ".join(terms): term_evidence(
+            test,
+            c.residual - base.residual,  # what the subset adds on the judged samples (noise units)
+            (base.fit.chi_square, c.fit.chi_square),
+            c.fit.samples,
+            # the terms' own parameters: a nuisance each fit may free or hold is no part of them
+            sum(len(c.fit.params[term]) for term in terms),
+            " + ".join(terms),
+            test.false_alarm / tried[len(terms)],
+        )
+        for terms, c in candidates.items()
+        if terms and c.usable
+    }
+
+
 def _preferred(candidates: dict, size: int, bic_margin: float) -> list[tuple[str, ...]]:
-    """The usable subsets of ``size`` terms that beat every usable smaller subset by ``bic_margin``."""
+    """The usable subsets of ``size`` terms, at values the field has (``PhysicsFit.plausible``), that beat every
+    usable smaller subset by ``bic_margin``."""
     smaller = min((c.fit.bic for t, c in candidates.items() if len(t) < size and c.usable), default=math.inf)
-    return [t for t, c in candidates.items() if len(t) == size and c.usable and c.fit.bic <= smaller - bic_margin]
+    return [
+        t
+        for t, c in candidates.items()
+        if len(t) == size and c.usable and c.fit.plausible and c.fit.bic <= smaller - bic_margin
+    ]
 
 
 def _candidate(subset, fit, make_model, samples, split, seen, iterations, block) -> Candidate:

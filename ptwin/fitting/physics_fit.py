@@ -56,6 +56,14 @@ class PhysicsFit:
         return self.samples / self.inflation
 
     @property
+    def plausible(self) -> bool:
+        """Every fitted value within the range samples of the field have: K within ``PLAUSIBLE_PERMEABILITY``
+        [m²], each term's parameters within theirs (a fit that runs K to 1e25 m² is a degenerate
+        parametrisation, whatever it does to the cost)."""
+        low, high = PLAUSIBLE_PERMEABILITY
+        return not self.implausible and low <= self.permeability <= high
+
+    @property
     def bic(self) -> float:
         """Bayesian information criterion under the noise model (n/κ² effective samples)."""
         n = self.effective_samples
