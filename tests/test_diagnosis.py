@@ -58,7 +58,7 @@ def candidate(terms, chi_square, val_rmse, violations=None, whiteness=1.0, resid
 
     params = {t: {"p": 1.0} for t in terms}
     fit = PhysicsFit(
-        terms, 1.0, 0.1, params, params, params, violations or {}, chi_square, 1000, 1, None, 1 + len(terms)
+        terms, 3e-16, 3e-17, params, params, params, violations or {}, chi_square, 1000, 1, None, 1 + len(terms)
     )
     return Candidate(terms, fit, val_rmse, whiteness, residual=residual)
 
@@ -223,7 +223,7 @@ def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_te
         fitted.append(subset)
         chi_square = {(): 2000.0, ("a",): single_chi_square, ("b",): 1980.0, ("c",): 1980.0}.get(subset, 900.0)
         fit = candidate(subset, chi_square, 1.0).fit
-        fit.permeability = single_permeability if subset == ("a",) else 3e-16
+        fit.permeability = single_permeability if subset == ("a",) else fit.permeability
         fit.model = lambda samples: samples.force + len(subset)
         return fit
 
@@ -317,6 +317,10 @@ def test_a_residual_within_the_noise_as_a_whole_names_a_term_it_is_not_noise_in_
     within = {"a": TermEvidence("a", 30.0, 40.0, 3.0, 0.005)}
     pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, within, HELD_OUT_PASSES)
     assert not pick.detected and pick.preferred == ("a",)
+    # Nor is it preferred where it won the BIC by running K to 1e25 m² (a degenerate parametrisation).
+    candidates[("a",)].fit.permeability = 1e25
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, within, HELD_OUT_PASSES)
+    assert not pick.detected and pick.preferred == () and pick.notes == []
 
 
 def test_an_experiment_two_groups_share_is_said_once():

@@ -244,9 +244,9 @@ def _select(
     shape (``evidence``, ``null.TermEvidence``: beyond what noise and a model error of ``MODEL_ERROR`` give
     it; a test of one shape is far more powerful than a test of all of them), if the selection keeps it.
     Otherwise nothing is named (contract v2.3), but the single term that beats the base model by the BIC
-    margin under the noise model, if any, is said to be preferred by the information criterion alone and
-    listed beside the base model (a model error a tenth of the noise, which real data always have, earns
-    such a margin over thousands of samples)."""
+    margin under the noise model at values the field has (``PhysicsFit.plausible``), if any, is said to be
+    preferred by the information criterion alone and listed beside the base model (a model error a tenth of
+    the noise, which real data always have, earns such a margin over thousands of samples)."""
     base = candidates[()]
     if base.leaves_structure(test):
         chosen, notes = choose(candidates, s.bic_margin, held_out)
@@ -279,7 +279,11 @@ def _select(
                 f"{shape.term} it is not: {shape.words()}"
             )
             return _Selection(False, chosen, notes=notes)
-    better = [c for t, c in candidates.items() if len(t) == 1 and c.usable and base.fit.bic - c.fit.bic >= s.bic_margin]
+    better = [
+        c
+        for t, c in candidates.items()
+        if len(t) == 1 and c.usable and c.fit.plausible and base.fit.bic - c.fit.bic >= s.bic_margin
+    ]
     if not better:
         return _Selection(False)
     best = min(better, key=lambda c: c.fit.bic)
@@ -294,8 +298,9 @@ def _select(
 def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings, held_out: HeldOutTest) -> list[tuple[str, ...]]:
     """Subsets that explain the data about as well as the chosen one; with nothing named, the term the
     information criterion alone prefers and the single terms that explain the data as well as the base
-    model does, with values samples of the field have, but with a materially different K (K is then not
-    fixed by the data; a K of 1e305 m² beside m = 2800 is no rival, only a degenerate parametrisation)."""
+    model does, with values samples of the field have (K among them: ``PhysicsFit.plausible``), but with a
+    materially different K (K is then not fixed by the data; a K of 1e25 m² beside a strain-dependent
+    permeability, or m = 2800, is no rival, only a degenerate parametrisation)."""
     if pick.chosen:
         return confounded(candidates, pick.chosen, s.bic_margin, held_out)
     if pick.unexplained:
@@ -307,7 +312,7 @@ def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings, held_out: 
         if len(t) == 1
         and t != pick.preferred
         and c.usable
-        and not c.fit.implausible
+        and c.fit.plausible
         and c.fit.bic - base.bic < s.bic_margin
         and _other_permeability(c.fit, base)
     ]
