@@ -87,8 +87,7 @@ def fit_candidates(
     usable: the best smaller one) leaves structure, every subset of k ≤ ``max_terms`` terms, on the train
     split; with the base model's residual within the noise and no subset beyond it in its own shape, also the
     subsets of k that contain one of k − 1 beating every smaller one by ``bic_margin`` (the module docstring).
-    A fit that fails is kept with its reason
-    (``Candidate.failure``) and left out of every choice.
+    A fit that fails is kept with its reason (``Candidate.failure``) and left out of every choice.
 
     ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are.
     """
