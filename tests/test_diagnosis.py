@@ -206,7 +206,7 @@ def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_te
     information criterion sees and the whole-residual test cannot prove, so the pairs it may be half of are
     fitted, and only those; at 3 BIC better, as the other two are, it is not; nor where the term is beyond the
     noise in its own shape (it is named alone), nor where its fit ran K to 1e25 m² (a degenerate
-    parametrisation, as one ramp-and-hold curve lets strain_dependent_permeability make)."""
+    parametrisation, such as strain_dependent_permeability makes of one ramp-and-hold curve)."""
     import torch
 
     import ptwin.diagnosis.name as name
