@@ -2,7 +2,27 @@
 
 import torch
 
-from ptwin.fitting.lm import LevenbergMarquardt, covariance
+from ptwin.fitting.lm import LevenbergMarquardt, covariance, jacobian_and_value
+
+
+def test_the_reverse_mode_jacobian_is_the_closed_form_even_where_a_parameter_is_unused_or_enters_linearly():
+    t = torch.linspace(0, 4, 50, dtype=torch.float64)
+    theta = torch.tensor([2.0, -1.3, 0.7, 5.0], dtype=torch.float64)  # amplitude, log rate, offset, unused
+
+    def curve(p):
+        return p[0] * torch.exp(-p[1].exp() * t) + p[2]
+
+    decay = torch.exp(-theta[1].exp() * t)
+    expected = torch.stack(
+        [decay, -theta[0] * theta[1].exp() * t * decay, torch.ones_like(t), torch.zeros_like(t)], dim=-1
+    )
+    jacobian, value = jacobian_and_value(curve, theta)
+    torch.testing.assert_close(jacobian, expected, rtol=1e-14, atol=1e-14)
+    torch.testing.assert_close(value, curve(theta))
+    other = torch.ones_like(t, requires_grad=True)  # a parameter of the module that is not in θ
+    for unrelated in (lambda p: t.clone(), lambda p: 2 * other):  # no path from θ at all
+        constant, _ = jacobian_and_value(unrelated, theta)
+        assert constant.shape == (50, 4) and not constant.any()
 
 
 def test_recovers_an_exponential_decay_from_a_poor_start():

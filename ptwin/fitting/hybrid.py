@@ -134,7 +134,7 @@ class HybridResidual:
     """θ ↦ [E/σ, (Y1 − E)/σ, √λ Θ] on ``samples[index]``, θ the entries of ``vector``; ``linearise(θ)`` → (J, r).
 
     The physics model depends on its own parameters only and the network on its own, so each is
-    differentiated apart — the physics by jacfwd over its few parameters, the network by per-sample
+    differentiated apart — the physics by ``jacobian_and_value`` over its few parameters, the network by per-sample
     gradients (``ErrorNetwork.jacobian``) — and J follows by the chain rule through the residual's assembly
     (``_assembled_jacobian``). (jacfwd over all of θ pushed the network's ~25 tangents through every sample:
     most of a hybrid step.)

@@ -31,7 +31,7 @@ class _SeparableLaw(torch.autograd.Function):
     its value: ∂F/∂U = F/U, ∂F/∂R = 3F/R, ∂F/∂x = s·F/x, ∂F/∂K = −F/K. One node instead
     of ~30 small ones is what takes the layer past 1e7 evaluations per second forward
     and backward; ``jvp`` and the generated vmap rule keep it usable under torch.func
-    (``jacfwd`` in every fit).
+    (stage 1's Newton is a ``jvp``).
     """
 
     generate_vmap_rule = True

@@ -31,7 +31,7 @@ def smooth_contact_radius(depth: torch.Tensor, probe_radius: float) -> torch.Ten
 
 def total(forces: dict[str, torch.Tensor]) -> torch.Tensor:
     """The sum of the forces [N]; stacked, not Python's ``sum``, whose start 0 is one more constant
-    operand (a zero tangent shaped in Python) under forward AD, in every Jacobian."""
+    operand (a zero tangent shaped in Python under forward AD: stage 1's Newton)."""
     return torch.stack(list(forces.values())).sum(0)
 
 
@@ -182,7 +182,7 @@ class ForceModel(nn.Module):
             elastic = self.elastic(self.depth(samples), permeability)
             return {"elastic": elastic, **self.rate_forces(samples, elastic, permeability)}
         # The rate forces of the samples and of the reference's depth nodes (for the elastic law) in one
-        # pass: half the ops, and under forward AD (jacfwd, in every fit) ops cost more than their arithmetic.
+        # pass: half the ops, and under autograd (a Jacobian in every fit step) ops cost more than their arithmetic.
         nodes = self.reference.node_samples()
         both, count = self._direct_forces(samples.join(nodes)), len(samples)
         law = self._elastic_law(nodes, {name: force[count:] for name, force in both.items()})
