@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from torch.func import jvp
 
 from ptwin.data.recordings import APPROACH
 from ptwin.physics.model import ForceModel, total
@@ -47,10 +46,19 @@ def apparent_permeability(
     def residual(log_k):
         return samples.force - total(base.components(samples, log_k.exp()))
 
+    def residual_and_slope(log_k):
+        # A sample's residual depends on its own K alone: the gradient of their sum is each one's slope
+        # (one reverse pass; forward AD cost fifteen times more here, its zero tangents taking a slow path).
+        log_k = log_k.detach().requires_grad_(True)
+        with torch.enable_grad():
+            value = residual(log_k)
+            (slope,) = torch.autograd.grad(value.sum(), log_k)
+        return value.detach(), slope
+
     log_k = torch.full_like(samples.force, math.log(start))
     with torch.no_grad():
         for _ in range(iterations):
-            value, slope = jvp(residual, (log_k,), (torch.ones_like(log_k),))
+            value, slope = residual_and_slope(log_k)
             step = (value / slope).nan_to_num(0.0).clamp(-2.0, 2.0)
             log_k = log_k - step
             if step.abs().max() < 1e-12:

@@ -30,8 +30,8 @@ def smooth_contact_radius(depth: torch.Tensor, probe_radius: float) -> torch.Ten
 
 
 def total(forces: dict[str, torch.Tensor]) -> torch.Tensor:
-    """The sum of the forces [N]; stacked, not Python's ``sum``, whose start 0 is one more constant
-    operand (a zero tangent shaped in Python under forward AD: stage 1's Newton)."""
+    """The sum of the forces [N]; stacked, one op in every Jacobian's graph where Python's ``sum`` adds
+    them one at a time from a constant 0."""
     return torch.stack(list(forces.values())).sum(0)
 
 

@@ -18,7 +18,7 @@ def linear_recurrence(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     shift = 1
     while shift < n:
         # The first ``shift`` samples have nothing before them: kept as they are, not padded with ones and
-        # zeros (under forward AD each padded constant costs a tangent of its own).
+        # zeros (each padded constant would be one more op in every Jacobian's graph).
         b = torch.cat([b[..., :shift], a[..., shift:] * b[..., :-shift] + b[..., shift:]], dim=-1)
         a = torch.cat([a[..., :shift], a[..., shift:] * a[..., :-shift]], dim=-1)
         shift *= 2
@@ -93,7 +93,7 @@ def hereditary_inverse(
         mean = _step_mean(torch.diff(time[begin - 1 : end])[:, None] / times)  # (B, M): each step's mean
         lower = torch.ones(end - begin, end - begin, dtype=torch.bool, device=time.device).tril()
         # The parameters (weights, extra) enter by matmuls and single sums, not as elementwise products
-        # with constants: under forward AD each constant operand costs a zero tangent shaped in Python.
+        # with constants: fewer ops in every Jacobian's graph.
         system = ((decay[:, 1:] * mean) @ weights + (1 + extra)).where(lower, torch.zeros_like(since[:, 1:]))
         carried = decay[:, 0] @ (weights * modes)
         previous = values[-1][-1]
