@@ -1,5 +1,7 @@
 """Levenberg–Marquardt: a nonlinear truth recovered, the covariance of a linear fit exact."""
 
+import math
+
 import torch
 
 from ptwin.fitting.lm import LevenbergMarquardt, covariance, jacobian_and_value
@@ -35,6 +37,22 @@ def test_recovers_an_exponential_decay_from_a_poor_start():
     solver = LevenbergMarquardt(residual, torch.tensor([0.5, 0.5], dtype=torch.float64))
     theta = solver.run(200, tolerance=0.0)
     torch.testing.assert_close(theta, truth, rtol=1e-8, atol=1e-8)
+
+
+def test_each_step_evaluates_the_model_once_its_jacobian_taken_from_the_accepted_trial():
+    t = torch.linspace(0, 4, 200, dtype=torch.float64)
+    calls = []
+
+    def residual(theta):
+        calls.append(theta.detach().clone())
+        return theta[0] * torch.exp(-theta[1].exp() * t) - 2.0 * torch.exp(-math.exp(-1.3) * t)
+
+    solver = LevenbergMarquardt(residual, torch.tensor([0.5, 0.5], dtype=torch.float64))
+    steps = []
+    solver.run(200, tolerance=0.0, callback=steps.append)
+    assert any(not step.accepted for step in steps) and sum(step.accepted for step in steps) > 5
+    assert len(calls) == 1 + len(steps)  # the first linearisation, then one trial a step
+    torch.testing.assert_close(solver.theta, torch.tensor([2.0, -1.3], dtype=torch.float64), rtol=1e-8, atol=1e-8)
 
 
 def test_a_settled_fit_stops_once_a_step_gains_less_than_asked_and_no_sooner():

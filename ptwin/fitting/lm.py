@@ -8,7 +8,8 @@ The state is a plain dict of tensors: a checkpoint resumes it exactly.
 
 A trial step the model cannot evaluate (a parameter outside the model's domain: a
 depth beyond the sample, a grid the fluid layer refuses) is a rejected step, like one
-that raises the cost; after a rejection θ has not moved, so the Jacobian is reused.
+that raises the cost; after a rejection θ has not moved, so the Jacobian is reused, and after
+an acceptance it comes from the trial's own evaluation (``Traced``): one evaluation a step.
 Only a start the model cannot evaluate, or a Jacobian that is not finite, ends the fit
 (``FitError``, with the reason in words).
 """
@@ -30,20 +31,36 @@ def jacobian_and_value(function: Callable[[torch.Tensor], torch.Tensor], x: torc
     forward AD (``jacfwd``) gives operands without a tangent zero tensors that take a slow path: on the bench
     map's spots these p + 2 plain passes cost 9.5 ms a Jacobian against ``jacfwd``'s 11.5 ms.
     """
-    x = x.detach().requires_grad_(True)
-    with torch.enable_grad():
-        value = function(x)
+    return Traced(function, x).jacobian_and_value()
+
+
+class Traced:
+    """f evaluated at x with its graph kept: the value now, the Jacobian there later without evaluating f again
+    (LM traces each trial step and differentiates the accepted ones)."""
+
+    def __init__(self, function: Callable[[torch.Tensor], torch.Tensor], x: torch.Tensor):
+        self._leaf = x.detach().requires_grad_(True)
+        with torch.enable_grad():
+            self._value = function(self._leaf)
+
+    @property
+    def value(self) -> torch.Tensor:
+        return self._value.detach()
+
+    def jacobian_and_value(self) -> tuple[torch.Tensor, torch.Tensor]:
+        x, value = self._leaf, self._value
         columns = torch.zeros(value.numel(), x.numel(), dtype=value.dtype, device=value.device)
         if value.requires_grad:
-            cotangent = torch.zeros_like(value, requires_grad=True)
-            (pullback,) = torch.autograd.grad(value, x, cotangent, create_graph=True, materialize_grads=True)
-            if pullback.requires_grad:
-                for i, direction in enumerate(torch.eye(x.numel(), dtype=x.dtype, device=x.device)):
-                    (column,) = torch.autograd.grad(
-                        pullback, cotangent, direction.reshape(x.shape), retain_graph=True, materialize_grads=True
-                    )
-                    columns[:, i] = column.reshape(-1)
-    return columns.reshape(*value.shape, *x.shape), value.detach()
+            with torch.enable_grad():
+                cotangent = torch.zeros_like(value, requires_grad=True)
+                (pullback,) = torch.autograd.grad(value, x, cotangent, create_graph=True, materialize_grads=True)
+                if pullback.requires_grad:
+                    for i, direction in enumerate(torch.eye(x.numel(), dtype=x.dtype, device=x.device)):
+                        (column,) = torch.autograd.grad(
+                            pullback, cotangent, direction.reshape(x.shape), retain_graph=True, materialize_grads=True
+                        )
+                        columns[:, i] = column.reshape(-1)
+        return columns.reshape(*value.shape, *x.shape), value.detach()
 
 
 class ParameterVector:
@@ -114,6 +131,8 @@ class LevenbergMarquardt:
             "cost": torch.tensor(float("nan"), dtype=torch.float64),
         }
         self._linear = None  # (J, r) at the current θ, kept across rejected steps
+        self._traced = None  # the last step's accepted trial with its graph: the next step's J without evaluating
+        # f again (within a run only: between runs the model may change under a kept graph)
 
     @property
     def theta(self) -> torch.Tensor:
@@ -123,29 +142,37 @@ class LevenbergMarquardt:
         """(J, r) at θ."""
         return jacobian_and_value(self.residual, theta) if self.jacobian is None else self.jacobian(theta)
 
-    def checked_linearise(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(J, r) at θ, or ``FitError`` saying why the model cannot be linearised there."""
+    def checked_linearise(self, theta: torch.Tensor, traced: Traced | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(J, r) at θ (from ``traced``, f's evaluation there, where given), or ``FitError`` saying why the model
+        cannot be linearised there."""
         try:
-            jacobian, r = self.linearise(theta)
+            jacobian, r = self.linearise(theta) if traced is None else traced.jacobian_and_value()
         except (ValueError, RuntimeError) as error:  # e.g. the fluid layer refusing a point off its grid
             raise FitError(f"the model cannot be evaluated ({str(error).splitlines()[0]})") from None
         if not (torch.isfinite(jacobian).all() and torch.isfinite(r).all()):
             raise FitError("the model or its derivatives are not finite at these parameters")
         return jacobian, r
 
-    def _trial_cost(self, theta: torch.Tensor) -> torch.Tensor:
-        """½‖r(θ)‖², infinite where the model cannot be evaluated."""
+    def _trial(self, theta: torch.Tensor) -> tuple[torch.Tensor, Traced | None]:
+        """(½‖r(θ)‖², its evaluation with the graph where LM differentiates it itself); the cost is infinite
+        where the model cannot be evaluated."""
         try:
-            with torch.no_grad():
-                trial = self.residual(theta)
+            if self.jacobian is None:
+                traced = Traced(self.residual, theta)
+                trial = traced.value
+            else:
+                traced = None
+                with torch.no_grad():
+                    trial = self.residual(theta)
         except (ValueError, RuntimeError):
-            return torch.tensor(float("inf"), dtype=torch.float64)
-        return 0.5 * (trial @ trial)
+            return torch.tensor(float("inf"), dtype=torch.float64), None
+        return 0.5 * (trial @ trial), traced
 
     def step(self) -> Step:
         s = self.state
         if self._linear is None:
-            self._linear = self.checked_linearise(s["theta"])
+            self._linear = self.checked_linearise(s["theta"], self._traced)
+            self._traced = None
         jacobian, r = self._linear
         normal = jacobian.T @ jacobian
         gradient = jacobian.T @ r
@@ -156,12 +183,13 @@ class LevenbergMarquardt:
         except RuntimeError:  # singular even with damping: a larger damping next time
             delta = torch.zeros_like(gradient)
         predicted = -(gradient @ delta + 0.5 * delta @ normal @ delta)
-        new_cost = self._trial_cost(s["theta"] + delta)
+        candidate = s["theta"] + delta
+        new_cost, traced = self._trial(candidate)
         gain = (cost - new_cost) / predicted if predicted > 0 else torch.tensor(-1.0)
         accepted = bool(torch.isfinite(new_cost) and gain > 0)
         if accepted:
-            self._linear = None
-            s["theta"] = s["theta"] + delta
+            self._linear, self._traced = None, traced
+            s["theta"] = candidate
             s["damping"] = s["damping"] * max(1 / 3, 1 - (2 * gain.item() - 1) ** 3)
             s["nu"] = torch.tensor(2.0, dtype=torch.float64)
             s["cost"] = new_cost.detach()
@@ -190,6 +218,7 @@ class LevenbergMarquardt:
                 break
             if step.damping > 1e12:
                 break
+        self._traced = None
         return self.theta
 
 
