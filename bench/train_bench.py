@@ -55,7 +55,7 @@ def lm_against_adam(regularisation: float = 1e-2, adam_steps: int = 5000) -> Non
         return hybrid_residual(twin, samples, train, regularisation, groups["physics"] + groups["network"])
 
     vector, residual = fresh()
-    solver = LevenbergMarquardt(residual, vector.get(), jacobian=residual.linearise)
+    solver = LevenbergMarquardt(residual, vector.get(), trace=residual.trace)
     costs = []
     started = time.perf_counter()
     solver.run(200, tolerance=1e-12, callback=lambda step: costs.append(step.cost))

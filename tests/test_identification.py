@@ -75,8 +75,9 @@ def test_regularised_newton_converges_k_to_the_minimum_of_the_hybrid_cost(prepar
 
 @pytest.mark.parametrize("which", ["all", "permeability", "network", "reversed"])
 def test_hybrid_jacobian_by_parts_equals_jacfwd_of_the_whole_residual(prepared, which):
-    # The hybrid step's J: jacfwd for the physics' own parameters, per-sample gradients for the network's,
-    # joined through the residual's assembly; against jacfwd over all of θ, for any set and order of names.
+    # The hybrid step's J: reverse mode for the physics' own parameters, per-sample gradients for the network's,
+    # joined through the residual's assembly; against jacfwd over all of θ, for any set and order of names. The
+    # trial's value (LM's cost, its graph kept for the Jacobian) is the residual's, to the bit.
     _, p = prepared
     samples, train = p.samples, p.split.train
     twin = p.make_model.twin(2.5e-16, 3e-10, samples, train)
@@ -93,6 +94,8 @@ def test_hybrid_jacobian_by_parts_equals_jacfwd_of_the_whole_residual(prepared, 
     jacobian, r_parts = residual.linearise(theta)
     torch.testing.assert_close(r_parts, r, rtol=1e-13, atol=0)
     torch.testing.assert_close(jacobian, expected, rtol=1e-10, atol=1e-12 * expected.abs().max().item())
+    with torch.no_grad():
+        assert torch.equal(residual.trace(theta).value, residual(theta))
 
 
 def test_curve_split_holds_out_the_fastest_curve_whole(prepared):

@@ -15,7 +15,7 @@ import torch
 from torch import nn
 from torch.func import functional_call, grad, vmap
 
-from ptwin.fitting.lm import ParameterVector, jacobian_and_value
+from ptwin.fitting.lm import ParameterVector, Traced
 from ptwin.physics.model import PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
 
@@ -134,7 +134,7 @@ class HybridResidual:
     """θ ↦ [E/σ, (Y1 − E)/σ, √λ Θ] on ``samples[index]``, θ the entries of ``vector``; ``linearise(θ)`` → (J, r).
 
     The physics model depends on its own parameters only and the network on its own, so each is
-    differentiated apart — the physics by ``jacobian_and_value`` over its few parameters, the network by per-sample
+    differentiated apart — the physics by reverse mode (``Traced``) over its few parameters, the network by per-sample
     gradients (``ErrorNetwork.jacobian``) — and J follows by the chain rule through the residual's assembly
     (``_assembled_jacobian``). (jacfwd over all of θ pushed the network's ~25 tangents through every sample:
     most of a hybrid step.)
@@ -170,21 +170,13 @@ class HybridResidual:
     def __call__(self, theta: torch.Tensor) -> torch.Tensor:
         return self._assemble(self._prediction("physics", theta), self._prediction("network", theta), theta)
 
+    def trace(self, theta: torch.Tensor) -> TracedHybrid:
+        """The residual evaluated at θ, the physics with its graph (LM's trial, then its Jacobian if accepted)."""
+        return TracedHybrid(self, theta)
+
     def linearise(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(J, r) at θ."""
-        values, jacobians = {}, {}
-        physics = self.columns["physics"]
-        if physics.numel():
-            jacobians["physics"], values["physics"] = jacobian_and_value(
-                lambda entries: self._prediction("physics", theta.index_copy(0, physics, entries)), theta[physics]
-            )
-        else:
-            with torch.no_grad():
-                values["physics"] = self._prediction("physics", theta)
-            jacobians["physics"] = values["physics"].new_zeros(values["physics"].numel(), 0)
-        network = self._own("network", theta)
-        jacobians["network"], values["network"] = self.twin.network.jacobian(self.samples, self.index, network)
-        return self._assembled_jacobian(jacobians, theta), self._assemble(values["physics"], values["network"], theta)
+        return self.trace(theta).jacobian_and_value()
 
     def _assembled_jacobian(self, jacobians: dict[str, torch.Tensor], theta: torch.Tensor) -> torch.Tensor:
         """∂/∂θ of ``_assemble`` from each model's own Jacobian: the error −∂F/σ, the mismatch (∂Y1 + ∂F)/σ, the
@@ -198,6 +190,38 @@ class HybridResidual:
         jacobian[samples : 2 * samples, network] = jacobians["network"] / self.noise[:, None]
         jacobian[2 * samples + torch.arange(network.numel(), device=network.device), network] = self.regularisation**0.5
         return jacobian
+
+
+class TracedHybrid:
+    """``HybridResidual`` at θ: its value now; (J, r) later from the physics' kept graph (``Traced``, over its
+    own few parameters) and the network's per-sample gradients (``ErrorNetwork.jacobian``)."""
+
+    def __init__(self, residual: HybridResidual, theta: torch.Tensor):
+        self.residual, self.theta = residual, theta
+        physics = residual.columns["physics"]
+        self.physics = None
+        if physics.numel():
+            self.physics = Traced(
+                lambda entries: residual._prediction("physics", theta.index_copy(0, physics, entries)), theta[physics]
+            )
+            force = self.physics.value
+        else:
+            with torch.no_grad():
+                force = residual._prediction("physics", theta)
+        self.force = force
+        with torch.no_grad():
+            self.value = residual._assemble(force, residual._prediction("network", theta), theta)
+
+    def jacobian_and_value(self) -> tuple[torch.Tensor, torch.Tensor]:
+        residual, theta = self.residual, self.theta
+        if self.physics is not None:
+            physics_jacobian, _ = self.physics.jacobian_and_value()
+        else:
+            physics_jacobian = self.force.new_zeros(self.force.numel(), 0)
+        network = residual._own("network", theta)
+        network_jacobian, correction = residual.twin.network.jacobian(residual.samples, residual.index, network)
+        jacobian = residual._assembled_jacobian({"physics": physics_jacobian, "network": network_jacobian}, theta)
+        return jacobian, residual._assemble(self.force, correction, theta)
 
 
 def newton_permeability(

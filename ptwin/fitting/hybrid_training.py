@@ -70,7 +70,7 @@ def train_hybrid(
         twin.load_state_dict(start, strict=False)
         _, residual = hybrid_residual(twin, samples, train, regularisation, names)
         rates = {n: settings.learning_rate[g] for g, members in groups.items() for n in members}
-        solver = LevenbergMarquardt(residual, vector.get(), vector.expand(rates), settings.damping, residual.linearise)
+        solver = LevenbergMarquardt(residual, vector.get(), vector.expand(rates), settings.damping, residual.trace)
         if progress["run"] is not None:
             solver.state = {k: v.clone() for k, v in progress["run"].items()}
         progress["lambda_index"] = index

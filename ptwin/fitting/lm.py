@@ -109,9 +109,9 @@ class Step:
 
 
 class LevenbergMarquardt:
-    """Minimise ½‖residual(θ)‖². ``learning_rate``: one factor per entry of θ (default 1); ``jacobian``:
-    θ ↦ (J, r) where the residual knows a cheaper route than differentiating all of θ at once
-    (default: ``jacobian_and_value``)."""
+    """Minimise ½‖residual(θ)‖². ``learning_rate``: one factor per entry of θ (default 1); ``trace``: θ ↦ the
+    residual evaluated there, ``.value`` now and ``.jacobian_and_value()`` → (J, r) later, where the residual
+    knows a cheaper route than differentiating all of θ at once (default: ``Traced``)."""
 
     def __init__(
         self,
@@ -119,9 +119,10 @@ class LevenbergMarquardt:
         theta: torch.Tensor,
         learning_rate: torch.Tensor | None = None,
         damping: float = 1e-3,
-        jacobian: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]] | None = None,
+        trace: Callable[[torch.Tensor], Traced] | None = None,
     ):
-        self.residual, self.jacobian = residual, jacobian
+        self.residual = residual
+        self.trace = trace if trace is not None else (lambda theta: Traced(residual, theta))
         self.learning_rate = torch.ones_like(theta) if learning_rate is None else learning_rate.to(theta)
         self.state = {
             "theta": theta.clone(),
@@ -140,7 +141,7 @@ class LevenbergMarquardt:
 
     def linearise(self, theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(J, r) at θ."""
-        return jacobian_and_value(self.residual, theta) if self.jacobian is None else self.jacobian(theta)
+        return self.trace(theta).jacobian_and_value()
 
     def checked_linearise(self, theta: torch.Tensor, traced: Traced | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """(J, r) at θ (from ``traced``, f's evaluation there, where given), or ``FitError`` saying why the model
@@ -154,19 +155,12 @@ class LevenbergMarquardt:
         return jacobian, r
 
     def _trial(self, theta: torch.Tensor) -> tuple[torch.Tensor, Traced | None]:
-        """(½‖r(θ)‖², its evaluation with the graph where LM differentiates it itself); the cost is infinite
-        where the model cannot be evaluated."""
+        """(½‖r(θ)‖², the residual traced there); the cost is infinite where the model cannot be evaluated."""
         try:
-            if self.jacobian is None:
-                traced = Traced(self.residual, theta)
-                trial = traced.value
-            else:
-                traced = None
-                with torch.no_grad():
-                    trial = self.residual(theta)
+            traced = self.trace(theta)
         except (ValueError, RuntimeError):
             return torch.tensor(float("inf"), dtype=torch.float64), None
-        return 0.5 * (trial @ trial), traced
+        return 0.5 * (traced.value @ traced.value), traced
 
     def step(self) -> Step:
         s = self.state
