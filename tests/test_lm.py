@@ -4,7 +4,7 @@ import math
 
 import torch
 
-from ptwin.fitting.lm import LevenbergMarquardt, covariance, jacobian_and_value
+from ptwin.fitting.lm import LevenbergMarquardt, Traced, covariance
 
 
 def test_the_reverse_mode_jacobian_is_the_closed_form_even_where_a_parameter_is_unused_or_enters_linearly():
@@ -18,12 +18,12 @@ def test_the_reverse_mode_jacobian_is_the_closed_form_even_where_a_parameter_is_
     expected = torch.stack(
         [decay, -theta[0] * theta[1].exp() * t * decay, torch.ones_like(t), torch.zeros_like(t)], dim=-1
     )
-    jacobian, value = jacobian_and_value(curve, theta)
+    jacobian, value = Traced(curve, theta).jacobian_and_value()
     torch.testing.assert_close(jacobian, expected, rtol=1e-14, atol=1e-14)
     torch.testing.assert_close(value, curve(theta))
     other = torch.ones_like(t, requires_grad=True)  # a parameter of the module that is not in θ
     for unrelated in (lambda p: t.clone(), lambda p: 2 * other):  # no path from θ at all
-        constant, _ = jacobian_and_value(unrelated, theta)
+        constant, _ = Traced(unrelated, theta).jacobian_and_value()
         assert constant.shape == (50, 4) and not constant.any()
 
 

@@ -131,12 +131,13 @@ def hybrid_residual(twin: HybridTwin, samples: Samples, index: torch.Tensor, reg
 
 
 class HybridResidual:
-    """θ ↦ [E/σ, (Y1 − E)/σ, √λ Θ] on ``samples[index]``, θ the entries of ``vector``; ``linearise(θ)`` → (J, r).
+    """θ ↦ [E/σ, (Y1 − E)/σ, √λ Θ] on ``samples[index]``, θ the entries of ``vector``; ``trace(θ)`` → it evaluated
+    there (``TracedHybrid``), ``linearise(θ)`` → (J, r).
 
     The physics model depends on its own parameters only and the network on its own, so each is
-    differentiated apart — the physics by reverse mode (``Traced``) over its few parameters, the network by per-sample
-    gradients (``ErrorNetwork.jacobian``) — and J follows by the chain rule through the residual's assembly
-    (``_assembled_jacobian``). (jacfwd over all of θ pushed the network's ~25 tangents through every sample:
+    differentiated apart — the physics by reverse mode (``Traced``) over its few parameters, the network by
+    per-sample gradients (``ErrorNetwork.jacobian``) — and J follows by the chain rule through the residual's
+    assembly (``_assembled_jacobian``). (jacfwd over all of θ pushed the network's ~25 tangents through every sample:
     most of a hybrid step.)
     """
 

@@ -1,6 +1,6 @@
 """Levenberg–Marquardt: least squares over chosen parameters of a module.
 
-Jacobians by reverse mode (``jacobian_and_value``), Marquardt scaling
+Jacobians by reverse mode (``Traced``), Marquardt scaling
 (the damping acts on diag(JᵀJ), so parameters of any unit are treated alike), Nielsen's
 gain-ratio damping update, and an optional per-parameter learning rate that scales
 each accepted step (a lower rate for K than for a network, as the paper trains).
@@ -23,20 +23,16 @@ import torch
 from torch import nn
 
 
-def jacobian_and_value(function: Callable[[torch.Tensor], torch.Tensor], x: torch.Tensor):
-    """(∂f/∂x, f(x)) by reverse mode: f once with its graph, its pullback u ↦ Jᵀu once with a graph of its
-    own, then each column Jeᵢ as the gradient of that pullback (linear in u) along eᵢ.
-
-    The fits' Jacobians are tall (hundreds of residuals, 1–3 parameters), forward mode's case, but torch's
-    forward AD (``jacfwd``) gives operands without a tangent zero tensors that take a slow path: on the bench
-    map's spots these p + 2 plain passes cost 9.5 ms a Jacobian against ``jacfwd``'s 11.5 ms.
-    """
-    return Traced(function, x).jacobian_and_value()
-
-
 class Traced:
     """f evaluated at x with its graph kept: the value now, the Jacobian there later without evaluating f again
-    (LM traces each trial step and differentiates the accepted ones)."""
+    (LM traces each trial step and differentiates the accepted ones).
+
+    The Jacobian by reverse mode: the pullback u ↦ Jᵀu once with a graph of its own, then each column Jeᵢ as
+    the gradient of that pullback (linear in u) along eᵢ. The fits' Jacobians are tall (hundreds of residuals,
+    1–3 parameters), forward mode's case, but torch's forward AD (``jacfwd``) gives operands without a tangent
+    zero tensors that take a slow path: on the bench map's spots these p + 2 plain passes cost 9.5 ms a
+    Jacobian against ``jacfwd``'s 11.5 ms.
+    """
 
     def __init__(self, function: Callable[[torch.Tensor], torch.Tensor], x: torch.Tensor):
         self._leaf = x.detach().requires_grad_(True)
