@@ -6,9 +6,10 @@ from pathlib import Path
 
 import pytest
 import torch
+from torch.func import functional_call
 
 from ptwin.data.recordings import load_recordings, write_recordings
-from ptwin.fitting.hybrid import hybrid_residual, newton_permeability
+from ptwin.fitting.hybrid import ErrorNetwork, hybrid_residual, newton_permeability
 from ptwin.fitting.physics_fit import fit_physics
 from ptwin.fitting.split import split_samples
 from ptwin.physics.contact import ContactNuisance
@@ -96,6 +97,27 @@ def test_hybrid_jacobian_by_parts_equals_jacfwd_of_the_whole_residual(prepared, 
     torch.testing.assert_close(jacobian, expected, rtol=1e-10, atol=1e-12 * expected.abs().max().item())
     with torch.no_grad():
         assert torch.equal(residual.trace(theta).value, residual(theta))
+
+
+@pytest.mark.parametrize("activation", ["sigmoid", "tanh", "relu"])
+def test_network_jacobian_rows_are_each_samples_own_gradient(prepared, activation):
+    # ErrorNetwork.jacobian by one reverse pass (δ ⊗ input per linear layer) against jacrev through
+    # functional_call, for every activation, other inputs and width, and a θ holding some of the weights only.
+    _, p = prepared
+    samples, train = p.samples, p.split.train
+    generator = torch.Generator().manual_seed(3)
+    network = ErrorNetwork(("depth", "velocity", "time"), 4, activation, samples, train, 2e-9, generator)
+    names = ["layers.2.weight", "layers.0.weight", "layers.0.bias"]
+    values = {name: dict(network.named_parameters())[name] * 1.1 for name in names}
+
+    def output(values):
+        return functional_call(network, values, (samples,))[train]
+
+    expected = torch.func.jacrev(output)(values)
+    expected = torch.cat([expected[name].reshape(train.numel(), -1) for name in names], 1)
+    jacobian, value = network.jacobian(samples, train, values)
+    torch.testing.assert_close(jacobian, expected, rtol=1e-12, atol=1e-14 * expected.abs().max().item())
+    torch.testing.assert_close(value, output(values), rtol=1e-14, atol=0)
 
 
 def test_curve_split_holds_out_the_fastest_curve_whole(prepared):

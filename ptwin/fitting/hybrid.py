@@ -13,7 +13,7 @@ from collections.abc import Sequence
 
 import torch
 from torch import nn
-from torch.func import functional_call, grad, vmap
+from torch.func import functional_call
 
 from ptwin.fitting.lm import ParameterVector, Traced
 from ptwin.physics.model import PERMEABILITY, ForceModel
@@ -85,20 +85,35 @@ class ErrorNetwork(nn.Module):
 
     def jacobian(self, samples: Samples, index: torch.Tensor, values: dict[str, torch.Tensor]):
         """(∂Y1/∂θ (n, p), Y1 (n,)) [N] on ``samples[index]`` with this network's parameters set to ``values``
-        ({name: tensor}; θ their entries in that order). Y1 of a sample depends on that sample alone, so the
-        rows are per-sample gradients (vmap of grad): one reverse pass over (n, hidden) arrays, where jacfwd
-        pushes one tangent per weight through every sample."""
+        ({name: tensor}; θ their entries in that order; the others stay as they are).
+
+        Y1 of a sample depends on that sample alone, so the gradient of ΣY1 with respect to a linear layer's
+        output, taken in one reverse pass, holds every sample's own: δ (n, out). That sample's gradients are
+        then δ ⊗ the layer's input for the weight and δ for the bias. ``torch.func``'s vmap of grad gives the
+        same rows (the tests compare them), but its first call imports torch._dynamo, a second of every run.
+        """
         layer_values = {name.removeprefix("layers."): value for name, value in values.items()}
-
-        def one(layer_values, x):
-            y = self._output(lambda z: functional_call(self.layers, layer_values, (z,)), x)
-            return y, y
-
-        gradients, output = vmap(grad(one, has_aux=True), in_dims=(None, 0))(
-            layer_values, self._standardised(samples)[index]
-        )
-        columns = [gradients[name].reshape(output.numel(), -1) for name in layer_values]
-        return torch.cat(columns, 1) if columns else output.new_zeros(output.numel(), 0), output
+        inputs, outputs = {}, {}  # of each linear layer, by its position
+        h = self._standardised(samples)[index].detach()
+        with torch.enable_grad():
+            for position, layer in enumerate(self.layers):
+                if not isinstance(layer, nn.Linear):
+                    h = layer(h)
+                    continue
+                inputs[position] = h.detach()
+                weight, bias = (
+                    layer_values.get(f"{position}.{p}", getattr(layer, p)).detach() for p in ("weight", "bias")
+                )
+                h = nn.functional.linear(h, weight, bias)
+                outputs[position] = h if outputs else h.requires_grad_(True)  # the graph starts at the first
+            output = self.force_scale * h.squeeze(-1)
+            deltas = dict(zip(outputs, torch.autograd.grad(output.sum(), list(outputs.values()))))
+        gradients = {}
+        for position, delta in deltas.items():
+            gradients[f"{position}.weight"] = (delta[:, :, None] * inputs[position][:, None, :]).flatten(1)
+            gradients[f"{position}.bias"] = delta
+        columns = [gradients[name] for name in layer_values]
+        return torch.cat(columns, 1) if columns else output.new_zeros(output.numel(), 0), output.detach()
 
 
 class HybridTwin(nn.Module):
