@@ -66,6 +66,20 @@ def test_derivative_in_permeability_is_minus_force_over_permeability(basis_file)
     assert gradient.item() == pytest.approx(-force.sum().item(), rel=1e-6)
 
 
+def test_a_layer_at_another_permeability_shares_the_tables_and_owns_its_k(basis_file):
+    layer = ptwin.FluidForce.load(basis_file, permeability=3e-16, viscosity=1e-3)
+    other = layer.at(5e-16)
+    fresh = ptwin.FluidForce.load(basis_file, permeability=5e-16, viscosity=1e-3)
+    assert other.functions is layer.functions and other.viscosity == layer.viscosity
+    velocity = torch.tensor([2e-6, 8e-5], dtype=torch.float64)
+    radius = torch.tensor([1e-6, 6e-6], dtype=torch.float64)
+    height = torch.full_like(radius, 6e-3)
+    assert torch.equal(other(velocity, radius, height), fresh(velocity, radius, height))
+    with torch.no_grad():
+        other.log_permeability += 1.0
+    assert layer.permeability.item() == pytest.approx(3e-16, rel=1e-14)
+
+
 def test_first_contact_follows_the_small_radius_law(basis_file):
     layer = ptwin.FluidForce.load(basis_file, permeability=2e-16, viscosity=1e-3)
     radius = torch.tensor([0.0, 1e-9, 3e-8], dtype=torch.float64)

@@ -90,10 +90,11 @@ class FluidForce(nn.Module):
     """F_D = ∫_top P dA [N] for batches of (U [m/s], R [m], H [m]).
 
     The recompressed basis is held as frozen buffers; ``log_permeability`` is the only
-    parameter. Build with ``FluidForce.load(path, permeability=2e-16, viscosity=1e-3)``.
+    parameter. Build with ``FluidForce.load(path, permeability=2e-16, viscosity=1e-3)``; ``at`` gives another
+    layer on the same basis at another K, sharing this one's tables.
     """
 
-    def __init__(self, basis: Basis, permeability: float, viscosity: float):
+    def __init__(self, basis: Basis, permeability: float, viscosity: float, functions: nn.ModuleDict | None = None):
         super().__init__()
         if not permeability > 0:
             raise ValueError(f"permeability must be > 0 m², got {permeability}")
@@ -105,7 +106,8 @@ class FluidForce(nn.Module):
         self.shape = basis.config.shape
         self.viscosity = float(viscosity)
         self.log_permeability = nn.Parameter(torch.tensor(math.log(permeability), dtype=torch.float64))
-        self.functions = nn.ModuleDict(
+        self.basis = basis
+        self.functions = functions or nn.ModuleDict(
             {
                 name: LogGridFunctions(basis.grids[name][0], basis.grids[name][1], values)
                 for name, values in zip(self.names, basis.force.functions)
@@ -126,6 +128,12 @@ class FluidForce(nn.Module):
     @classmethod
     def load(cls, path: str | Path, permeability: float = 2e-16, viscosity: float = 1e-3) -> FluidForce:
         return cls(Basis.load(path), permeability, viscosity)
+
+    def at(self, permeability: float) -> FluidForce:
+        """A fresh layer at K = ``permeability`` [m²] on this one's basis and viscosity. Its tables (splines and
+        power laws fitted to the basis: milliseconds, every model a fit builds) are this one's: read-only
+        buffers, so one set serves every layer."""
+        return FluidForce(self.basis, permeability, self.viscosity, self.functions)
 
     @property
     def permeability(self) -> torch.Tensor:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 import torch
@@ -50,7 +51,7 @@ class ModelFactory:
     ) -> ForceModel:
         """The base model with ``terms`` (starting at ``values``), K = ``permeability`` or the default."""
         meta = self.meta
-        fluid = FluidForce(self.basis, permeability or self.permeability, meta.fluid_viscosity)
+        fluid = self._fluid.at(permeability or self.permeability)
         contact = ContactNuisance(self.contact_ids, self.reference_onset) if self.contact_ids is not None else None
         model = ForceModel(
             self.reference,
@@ -63,6 +64,11 @@ class ModelFactory:
             contact,
         )
         return model.to(self.device)
+
+    @cached_property
+    def _fluid(self) -> FluidForce:
+        """The basis's fluid layer, built once: every model's is this one's at its own K (``FluidForce.at``)."""
+        return FluidForce(self.basis, self.permeability, self.meta.fluid_viscosity)
 
     def twin(self, permeability: float, force_scale: float, samples: Samples, train: torch.Tensor) -> HybridTwin:
         """A hybrid twin: the base model at K = ``permeability`` next to a seeded error network whose
