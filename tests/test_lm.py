@@ -1,6 +1,8 @@
 """Levenberg–Marquardt: a nonlinear truth recovered, the covariance of a linear fit exact."""
 
 import math
+import subprocess
+import sys
 
 import torch
 
@@ -25,6 +27,19 @@ def test_the_reverse_mode_jacobian_is_the_closed_form_even_where_a_parameter_is_
     for unrelated in (lambda p: t.clone(), lambda p: 2 * other):  # no path from θ at all
         constant, _ = Traced(unrelated, theta).jacobian_and_value()
         assert constant.shape == (50, 4) and not constant.any()
+
+
+def test_a_jacobian_leaves_torchs_symbolic_shapes_and_sympy_unimported():
+    # Their import is 0.4 s of every run: gradients of scalars, never a grad_output whose shape torch checks.
+    program = (
+        "import sys, torch\n"
+        "from ptwin.fitting.lm import Traced\n"
+        "theta = torch.tensor([0.5, 2.0], dtype=torch.float64)\n"
+        "Traced(lambda p: p[0] * torch.linspace(0, 1, 9, dtype=torch.float64) ** p[1], theta).jacobian_and_value()\n"
+        "print(sorted(m for m in ('sympy', 'torch.fx.experimental.symbolic_shapes') if m in sys.modules))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, check=True)
+    assert result.stdout.strip() == "[]"
 
 
 def test_recovers_an_exponential_decay_from_a_poor_start():
