@@ -107,12 +107,14 @@ class FluidForce(nn.Module):
         self.viscosity = float(viscosity)
         self.log_permeability = nn.Parameter(torch.tensor(math.log(permeability), dtype=torch.float64))
         self.basis = basis
-        self.functions = functions or nn.ModuleDict(
-            {
-                name: LogGridFunctions(basis.grids[name][0], basis.grids[name][1], values)
-                for name, values in zip(self.names, basis.force.functions)
-            }
-        )
+        if functions is None:  # the basis's tables, unless another layer on it shares its own (``at``)
+            functions = nn.ModuleDict(
+                {
+                    name: LogGridFunctions(basis.grids[name][0], basis.grids[name][1], values)
+                    for name, values in zip(self.names, basis.force.functions)
+                }
+            )
+        self.functions = functions
         self.register_buffer("core", basis.force.core)
         if self.coordinates == "scaled" and self.functions["contact_radius"].power_law is None:
             raise ValueError("basis: the contact-radius mode is not a power law; rebuild it")
