@@ -10,7 +10,7 @@ from hydra import compose, initialize_config_dir
 
 from ptwin.app import register, typed
 from ptwin.data.recordings import load_recordings
-from ptwin.pipeline.inject import added_force, detection, detection_limits
+from ptwin.pipeline.inject import Trial, added_force, detection, detection_limits
 from ptwin.pipeline.prepare import prepare
 from tests.conftest import CONFIGS, simulated_set
 
@@ -56,6 +56,20 @@ def test_a_viscosity_added_to_a_set_is_found_with_its_size(tmp_path, coarse_cach
     assert "## What these recordings could have shown" in report and "The smallest gamma named: 5" in report
     injected = load_recordings(tmp_path / "run" / "size-1" / "recordings")
     assert "ptwin.inject: solid_viscosity (gamma 5) added" in injected.meta.notes
+
+
+def test_a_verdict_says_which_other_terms_the_diagnosis_named():
+    # 5 Pa s added to real agarose came back as pore_pressure_relaxation + solid_relaxation; "not named" alone hid it.
+    others = ("pore_pressure_relaxation (strong)", "solid_relaxation (weak)")
+    missed = Trial(1.0, 5.0, 36.6, "", None, [None, None], False, True, -5.72, others)
+    assert missed.verdict("gamma", 0.0) == (
+        "not named (gamma -5.72 fitted alone); the diagnosis named pore_pressure_relaxation (strong) + "
+        "solid_relaxation (weak)"
+    )
+    named = Trial(2.0, 10.0, 73.2, "weak", 9.79, [8.61, 11.1], False, True, others=others[1:])
+    assert named.verdict("gamma", 0.0).endswith("9.79 over the recordings' own; beside it solid_relaxation (weak)")
+    alone = Trial(2.0, 10.0, 73.2, "weak", 9.79, [8.61, 11.1], False, True)
+    assert "beside" not in alone.verdict("gamma", 0.0) and "the diagnosis named" not in alone.verdict("gamma", 0.0)
 
 
 @pytest.mark.slow

@@ -48,18 +48,23 @@ class Trial:
     unexplained: bool
     candidate: bool  # whether the diagnosis fitted the term at all (see ``no_candidate``)
     alone: float | None = None  # the strength fitted with the term alone beside the base model, named or not
+    others: tuple[str, ...] = ()  # the other terms the diagnosis named, each with its confidence
 
     def verdict(self, strength: str, native: float) -> str:
-        """What the diagnosis said of the term, in words; ``native``: the strength the recordings fit as they
-        are (``native_strength``)."""
+        """What the diagnosis said of the term, in words, and of any other term it named (a term added and
+        read as another is the worst answer: "not named" alone would hide it); ``native``: the strength the
+        recordings fit as they are (``native_strength``)."""
+        others = f"; the diagnosis named {' + '.join(self.others)}" if self.others else ""
         if not self.confidence:
             said = "unexplained" if self.unexplained else "not named"
             if not self.candidate:
-                return f"{said} (no candidate in these recordings)"
-            return said if self.alone is None else f"{said} ({strength} {self.alone:.3g} fitted alone)"
+                return f"{said} (no candidate in these recordings){others}"
+            alone = "" if self.alone is None else f" ({strength} {self.alone:.3g} fitted alone)"
+            return f"{said}{alone}{others}"
         found = bounded(self.found, self.interval, ".3g")
         size = "" if self.added is None else f"; {number(self.found - native, '.3g')} over the recordings' own"
-        return f"named ({self.confidence}), {strength} {found}{size}"
+        beside = f"; beside it {' + '.join(self.others)}" if self.others else ""
+        return f"named ({self.confidence}), {strength} {found}{size}{beside}"
 
 
 def added_force(
@@ -242,12 +247,14 @@ def _quiet(_: str) -> None:
 
 def _trial(size: float, added: float | None, peak: float, outcome: RunResult, term: str, strength: str) -> Trial:
     diagnosis, candidate = outcome.diagnosis, term in outcome.candidates
+    others = tuple(f"{e['term']} ({e['confidence']})" for e in diagnosis["left_out"] if e["term"] != term)
     entry = next((e for e in diagnosis["left_out"] if e["term"] == term), None)
     if entry is None:
         alone = (outcome.candidates.get(term) or {}).get(strength)
-        return Trial(size, added, peak, "", None, [None, None], diagnosis["unexplained"], candidate, alone)
+        return Trial(size, added, peak, "", None, [None, None], diagnosis["unexplained"], candidate, alone, others)
     value, interval = entry["params"][strength], entry["param_interval"][strength]
-    return Trial(size, added, peak, entry["confidence"], value, interval, diagnosis["unexplained"], candidate)
+    unexplained = diagnosis["unexplained"]
+    return Trial(size, added, peak, entry["confidence"], value, interval, unexplained, candidate, others=others)
 
 
 def no_candidate(term: str, trials: list[Trial], listed: list[str]) -> str | None:
