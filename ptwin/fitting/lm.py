@@ -27,11 +27,15 @@ class Traced:
     """f evaluated at x with its graph kept: the value now, the Jacobian there later without evaluating f again
     (LM traces each trial step and differentiates the accepted ones).
 
-    The Jacobian by reverse mode: the pullback u ↦ Jᵀu once with a graph of its own, then each column Jeᵢ as
-    the gradient of that pullback (linear in u) along eᵢ. The fits' Jacobians are tall (hundreds of residuals,
-    1–3 parameters), forward mode's case, but torch's forward AD (``jacfwd``) gives operands without a tangent
-    zero tensors that take a slow path: on the bench map's spots these p + 2 plain passes cost 9.5 ms a
-    Jacobian against ``jacfwd``'s 11.5 ms.
+    The Jacobian by reverse mode: the pullback u ↦ Jᵀu once with a graph of its own (the gradient of u·f), then
+    each column Jeᵢ as the gradient of the pullback's i-th entry, which is linear in u. The fits' Jacobians are
+    tall (hundreds of residuals, 1–3 parameters), forward mode's case, but torch's forward AD (``jacfwd``) gives
+    operands without a tangent zero tensors that take a slow path: on the bench map's spots these p + 2 plain
+    passes cost 9.5 ms a Jacobian against ``jacfwd``'s 11.5 ms.
+
+    Gradients of scalars, never ``grad_outputs``: torch checks a grad_output's shape with its symbolic-shapes
+    module, whose first use imports sympy (0.4 s of every run); the scalars' two extra ops cost about 45 µs a
+    Jacobian.
     """
 
     def __init__(self, function: Callable[[torch.Tensor], torch.Tensor], x: torch.Tensor):
@@ -49,9 +53,6 @@ class Traced:
         if value.requires_grad:
             with torch.enable_grad():
                 cotangent = torch.zeros_like(value, requires_grad=True)
-                # Gradients of scalars (u·f, then each entry of Jᵀu) rather than with grad_outputs: torch checks
-                # a grad_output's shape with its symbolic-shapes module, whose first use imports sympy, 0.4 s of
-                # every run; the two extra ops cost about 45 µs a Jacobian.
                 product = torch.dot(value.reshape(-1), cotangent.reshape(-1))
                 (pullback,) = torch.autograd.grad(product, x, create_graph=True, materialize_grads=True)
                 if pullback.requires_grad:
