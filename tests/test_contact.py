@@ -41,3 +41,16 @@ def test_levels_are_kept_as_drag_only_where_they_rise_with_speed_beyond_free_off
         levels_with_speed(3e-10 + 1e-4 * speeds + 2e-10 * rng.standard_normal(5), stds, speeds) for _ in range(200)
     ]
     assert np.mean([fit.shows_drag for fit in drags]) >= 0.97
+
+
+def test_the_onset_read_with_a_root_depth_force_places_the_contact_that_hertz_alone_takes_for_earlier():
+    # A solid viscosity (π·γ·U·√(ρw), 5 Pa·s at 15 µm/s) grows from contact as √w, the first-order shape of a
+    # contact shift: the Hertz onset puts this contact 25 nm early (26 ± 1 nm over twelve draws). Read as Hertz
+    # beside a √w force, the samples before contact place it (3 nm late; 1 ± 2 nm over the twelve).
+    setting = {**SOFT_CANTILEVER, "base_speeds": (15e-6,), "contact_error": 2e-7, "tilt": 0.0}
+    experiment = Experiment(**setting, effects={"solid_viscosity": {"gamma": 5.0}})
+    _, curves = simulate(experiment)
+    _, _, error = np.random.default_rng([0, 1]).standard_normal(3)  # the simulator's draws: the contact's
+    baseline = estimate_baseline(curves["z"].to_numpy(), curves["force"].to_numpy(), experiment.spring_constant)
+    assert baseline.contact_z == pytest.approx(2e-7 * error - 25e-9, abs=5e-9)
+    assert baseline.contact_z + baseline.root_shift == pytest.approx(2e-7 * error, abs=10e-9)

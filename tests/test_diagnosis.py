@@ -138,10 +138,11 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
 
     import ptwin.diagnosis.name as name
 
-    fitted = []
+    fitted, starts = [], []
 
-    def fit_with_starts(make_model, subset, samples, index, iterations):
+    def fit_with_starts(make_model, subset, samples, index, iterations, base=None):
         fitted.append(subset)
+        starts.append(base)
         fit = candidate(subset, 1000.0 + 100.0 * (3 - len(subset)), 1.0).fit
         fit.model = lambda samples: samples.force + len(subset)  # its residual tells its size
         return fit
@@ -159,6 +160,8 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     name.fit_candidates(None, samples, split, ["a", "b", "c"], max_terms, 1, 50, ABOVE_FIVE, progress=lambda line: None)
     assert max(len(t) for t in fitted) == largest
     assert sum(len(t) == largest for t in fitted) == {1: 3, 2: 3, 3: 1}[largest]
+    # the base model fitted first, every subset with terms given it (where it starts: ``fit_with_starts``)
+    assert starts[0] is None and all(base is not None and base.terms == () for base in starts[1:])
 
 
 @pytest.mark.parametrize(("base_whiteness", "largest"), [(2.0, 1), (50.0, 2)])
@@ -173,7 +176,7 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
 
     fitted = []
 
-    def fit_with_starts(make_model, subset, samples, index, iterations):
+    def fit_with_starts(make_model, subset, samples, index, iterations, base=None):
         fitted.append(subset)
         fit = candidate(
             subset, 1000.0, 1.0, violations={t: "p < 0" for t in subset[:1]} if len(subset) == 1 else {}
@@ -219,7 +222,7 @@ def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_te
 
     fitted = []
 
-    def fit_with_starts(make_model, subset, samples, index, iterations):
+    def fit_with_starts(make_model, subset, samples, index, iterations, base=None):
         fitted.append(subset)
         chi_square = {(): 2000.0, ("a",): single_chi_square, ("b",): 1980.0, ("c",): 1980.0}.get(subset, 900.0)
         fit = candidate(subset, chi_square, 1.0).fit

@@ -168,6 +168,22 @@ def test_a_curve_alone_gets_the_forces_and_the_per_curve_fit_it_gets_among_the_o
         assert fits[curve].chi_square == pytest.approx(among.chi_square, rel=1e-6), curve
 
 
+def test_a_term_growing_as_root_depth_starts_from_the_contacts_its_onset_reads(estimated):
+    # A viscosity's force is a contact shift's at first order: its fit starts where the onset read as Hertz
+    # beside a √w force puts each contact (``Baseline.root_shift``), relative to the reference's; others start
+    # from the Hertz estimates.
+    _, p = estimated
+    shifts = {c.curve: c.baseline.root_shift for c in p.curves}
+    reference = p.recordings.meta.reference_curve
+    assert len({round(shift * 1e12) for shift in shifts.values()}) > 1  # the curves' own readings differ
+    model = p.make_model(("solid_viscosity",))
+    for curve, offset in model.contact.values().items():
+        assert offset == pytest.approx(shifts[curve] - shifts[reference], abs=1e-15), curve
+    assert model.contact.reference.item() == pytest.approx(shifts[reference], abs=1e-15)
+    other = p.make_model(("solid_relaxation",)).contact
+    assert not other.offsets.any() and other.reference.item() == 0.0
+
+
 def test_a_simulated_next_curve_never_takes_a_recorded_curves_contact_correction(estimated):
     # Corrections are found by curve id: a recorded curve named 'next' must not lend its own to the design's
     # simulated next experiment, whose contact is known.

@@ -49,7 +49,7 @@ def test_a_toy_term_is_fitted_selected_reported_and_plotted(tmp_path, coarse_cac
     assert RateStiffening.name in title
 
 
-def test_a_term_acting_on_the_fluid_force_alone_settles_from_the_default_permeability_only(monkeypatch):
+def test_the_permeabilities_a_term_starts_from_follow_its_hooks_and_its_contact_caveat(monkeypatch):
     from types import SimpleNamespace
 
     import ptwin.fitting.physics_fit as physics_fit
@@ -64,19 +64,25 @@ def test_a_term_acting_on_the_fluid_force_alone_settles_from_the_default_permeab
     asked = []
 
     def make_model(terms, values, permeability=None):
-        asked.append(permeability)
-        return permeability
+        return SimpleNamespace(permeability=permeability, contact=None)
+
+    def fit_physics(model, *rest):
+        asked.append(model.permeability)
+        return SimpleNamespace(chi_square=1.0, physical=True)
 
     monkeypatch.setattr(physics_fit, "cheapest", lambda models, samples, index: list(models)[-1])
-    monkeypatch.setattr(physics_fit, "fit_physics", lambda model, *rest: SimpleNamespace(chi_square=1.0))
+    monkeypatch.setattr(physics_fit, "fit_physics", fit_physics)
+    fluid_off, base = physics_fit.PLAUSIBLE_PERMEABILITY[1], SimpleNamespace(permeability=3e-16)
     for terms, starts in (
-        (("pore_pressure_relaxation",), {None}),
-        (("pore_pressure_relaxation", "strain_dependent_permeability"), {None}),
-        (("pore_pressure_relaxation", "solid_viscosity"), {None, physics_fit.PLAUSIBLE_PERMEABILITY[1]}),
+        (("pore_pressure_relaxation",), [None]),
+        (("pore_pressure_relaxation", "strain_dependent_permeability"), [None]),
+        # a viscosity (its CONTACT_CAVEAT): the base model's K too, and the base model's optimum itself
+        (("pore_pressure_relaxation", "solid_viscosity"), [None, 3e-16, fluid_off, 3e-16]),
+        (("cantilever_drag",), [None, fluid_off]),
     ):
         asked.clear()
-        physics_fit.fit_with_starts(make_model, terms, None, None)
-        assert set(asked) == starts, terms
+        physics_fit.fit_with_starts(make_model, terms, None, None, base=base)
+        assert asked == starts, terms
 
 
 def test_each_permeability_start_is_fitted_whole_and_the_lower_chi_square_kept(monkeypatch):
@@ -88,6 +94,31 @@ def test_each_permeability_start_is_fitted_whole_and_the_lower_chi_square_kept(m
 
     whole = {None: 2414.2, physics_fit.PLAUSIBLE_PERMEABILITY[1]: 2121.5}
     monkeypatch.setattr(physics_fit, "cheapest", lambda models, samples, index: list(models)[-1])
-    monkeypatch.setattr(physics_fit, "fit_physics", lambda model, *rest: SimpleNamespace(chi_square=whole[model]))
+    monkeypatch.setattr(
+        physics_fit, "fit_physics", lambda model, *rest: SimpleNamespace(chi_square=whole[model], physical=True)
+    )  # no base model given: the two K alone
     fit = physics_fit.fit_with_starts(lambda terms, values, permeability=None: permeability, ("solid_viscosity",), 0, 0)
     assert fit.chi_square == 2121.5
+
+
+def test_a_physical_fit_is_kept_over_a_non_physical_one_of_lower_chi_square(monkeypatch):
+    # Real PAAm with 5 Pa·s added: γ −5.9 at χ² 3844 from the default K, γ 5.8 at 3876 from the base model's K.
+    # A term's parameters end at their physical range: the best fit within it is the one kept.
+    from types import SimpleNamespace
+
+    import ptwin.fitting.physics_fit as physics_fit
+
+    base = SimpleNamespace(permeability=6.4e-16, model=None)
+    fits = iter([(3843.8, False), (3875.7, True), (19719.0, True), (4631.7, True)])  # in the order of the starts
+    monkeypatch.setattr(physics_fit, "cheapest", lambda models, samples, index: list(models)[-1])
+    monkeypatch.setattr(physics_fit, "_nested", lambda make_model, terms, base: "nested")
+
+    def fit_physics(model, *rest):
+        chi_square, physical = next(fits)
+        return SimpleNamespace(chi_square=chi_square, physical=physical)
+
+    monkeypatch.setattr(physics_fit, "fit_physics", fit_physics)
+    make_model = lambda terms, values, permeability=None: permeability  # noqa: E731
+    assert physics_fit.fit_with_starts(make_model, ("solid_viscosity",), 0, 0, base=base).chi_square == 3875.7
+    fits = iter([(3843.8, False), (3875.7, False), (19719.0, False), (4631.7, False)])  # none physical
+    assert physics_fit.fit_with_starts(make_model, ("solid_viscosity",), 0, 0, base=base).chi_square == 3843.8

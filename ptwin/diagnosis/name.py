@@ -96,7 +96,8 @@ def fit_candidates(
     candidates = {}
 
     def add(subset):
-        candidate = _candidate(subset, fitted.get(subset), make_model, samples, split, seen, iterations, block)
+        base = candidates[()].fit if () in candidates else None
+        candidate = _candidate(subset, fitted.get(subset), make_model, samples, split, seen, iterations, block, base)
         candidates[subset] = candidate
         name = " + ".join(subset) or "base"
         figures = f"BIC {candidate.fit.bic:12.1f}  val RMS {candidate.val_rmse * 1e9:7.3f} nN" if candidate.fit else ""
@@ -156,9 +157,9 @@ def _preferred(candidates: dict, size: int, bic_margin: float) -> list[tuple[str
     ]
 
 
-def _candidate(subset, fit, make_model, samples, split, seen, iterations, block) -> Candidate:
+def _candidate(subset, fit, make_model, samples, split, seen, iterations, block, base=None) -> Candidate:
     try:
-        fit = fit or fit_with_starts(make_model, subset, samples, split.train, iterations)
+        fit = fit or fit_with_starts(make_model, subset, samples, split.train, iterations, base)
     except FitError as error:
         return Candidate(subset, None, math.inf, math.inf, str(error))
     with torch.no_grad():

@@ -56,6 +56,15 @@ class ContactNuisance(nn.Module):
         extra = torch.zeros(1, dtype=self.offsets.dtype, device=self.offsets.device)
         return torch.cat([self.offsets, extra])[lookup[samples.curve]]
 
+    def place(self, shifts: dict[str, float], reference: str) -> None:
+        """Start from contacts ``shifts`` [m] later than the estimates, by curve id (``reference``: the reference
+        curve's id): a fit of a term that grows as √w from contact starts where the onset read with that shape
+        puts them (``Baseline.root_shift``)."""
+        with torch.no_grad():
+            for i, curve in enumerate(self.curve_ids):
+                self.offsets[i] = shifts[curve] - shifts[reference]
+            self.reference.fill_(shifts[reference])
+
     def values(self) -> dict[str, float]:
         """The corrections [m] by curve id (the reference's relative ones)."""
         return {curve: value.item() for curve, value in zip(self.curve_ids, self.offsets)}

@@ -71,7 +71,9 @@ class Term(nn.Module):
     what it models is then fitted or removed as a nuisance; None if it stays one),
     ``KEPT_BY_COMMON_LEVEL`` (it stays a candidate after all where one common baseline level was
     removed from every curve: what it models is then still in the force),
-    ``CONTACT_CAVEAT`` (what estimated contacts hide of it on approach curves, or None),
+    ``CONTACT_CAVEAT`` (what estimated contacts hide of it on approach curves, or None; a term with one grows
+    as √w from contact, and its fits start from where its shape puts the contacts, ``ModelFactory``, and from
+    the base model's K and optimum, ``fit_with_starts``),
     ``TYPICAL`` (values samples of the field show: where ``python -m ptwin.inject`` starts its search for the
     smallest size a set could have shown, scaling the first, the term's strength).
     """
@@ -176,6 +178,11 @@ class SolidViscosity(Term):
 
     name = "solid_viscosity"
     PARAMS = {"gamma": Parameter("Pa s", 0.0, minimum=0.0, plausible=(0.0, 1e4))}
+    # Half-decades across the field's range: the contact corrections absorb this force at first order (the
+    # caveat below), so χ² has a mirror basin at negative γ, and LM from γ 0 can fall either way (real PAAm
+    # with 5 Pa·s added: to γ −6.4 from every start at 0; from these, the cost at the starts picks γ 3 and the
+    # fit ends at γ 5.8).
+    STARTS = [{"gamma": gamma} for gamma in (0.0, 0.3, 1.0, 3.0, 10.0, 30.0)]
     TYPICAL = {"gamma": 5.0}
     TELL_APART = "a force ∝ R·U: compare base speeds a decade apart at equal depth"
     # π·γ·R·U = π·γ·U·√(2ρw) and a contact shift δ changes a sphere's force by 2E*·√(ρw)·δ: the same √w.

@@ -116,13 +116,14 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
     as_recorded = run(settings, output_dir / "as-recorded", quiet)
     trials = [_trial(0.0, None, 0.0, as_recorded, inject.term, strength)]
     prepared = prepare(settings, quiet)
-    native = native_strength(prepared, inject.term, strength, settings.optim.physics_fit.iterations)
+    base_fit = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+    native = native_strength(prepared, inject.term, strength, settings.optim.physics_fit.iterations, base_fit)
     own = f"{strength} {native:.3g}, the recordings' own (0 where not physical)"
     progress(f"  as recorded: {trials[0].verdict(strength, native)}; a size found is read over {own}")
     for i, size in enumerate(sorted(inject.sizes), start=1):
         params = inject.scaled(size)
         folder = output_dir / f"size-{size:g}"
-        peak = write_injected(prepared, inject.term, params, folder / "recordings")
+        peak = write_injected(prepared, inject.term, params, folder / "recordings", base_fit)
         data = replace(settings.data, path=str(folder / "recordings"))
         outcome = run(replace(settings, data=data), folder / "run", quiet)
         trials.append(_trial(size, params[strength], peak, outcome, inject.term, strength))
@@ -152,7 +153,7 @@ def detection_limits(
     found, native = {}, {}
     for i, term in enumerate(terms, start=1):
         strength = next(iter(VOCABULARY[term].PARAMS))
-        native[term] = native_strength(prepared, term, strength, settings.optim.physics_fit.iterations)
+        native[term] = native_strength(prepared, term, strength, settings.optim.physics_fit.iterations, base_fit)
         found[term] = []
         for peak, params in _ladder(prepared, term, base_fit):
             folder = output_dir / f"{term}-peak-{peak:g}"
@@ -270,12 +271,14 @@ def no_candidate(term: str, trials: list[Trial], listed: list[str]) -> str | Non
     return f"{term} was no candidate in these recordings ({reason}): they cannot show it at any size"
 
 
-def native_strength(prepared: Prepared, term: str, strength: str, iterations: int) -> float:
+def native_strength(prepared: Prepared, term: str, strength: str, iterations: int, base_fit: PhysicsFit) -> float:
     """The term's strength the recordings fit as they are, named or not (0 where its fit fails or is not
     physical): what a size found is read against. Recordings hold some of any term's shape already (below
-    the naming threshold, or a model error it projects onto), and an added size adds to that."""
+    the naming threshold, or a model error it projects onto), and an added size adds to that. Fitted from
+    the starts the diagnosis gives it (``base_fit``: the base model fitted to the training samples)."""
+    samples, train = prepared.samples, prepared.split.train
     try:
-        fit = fit_with_starts(prepared.make_model, (term,), prepared.samples, prepared.split.train, iterations)
+        fit = fit_with_starts(prepared.make_model, (term,), samples, train, iterations, base_fit)
     except FitError:
         return 0.0
     return fit.params[term][strength] if fit.physical else 0.0
