@@ -4,6 +4,7 @@ import math
 import subprocess
 import sys
 
+import pytest
 import torch
 
 from ptwin.fitting.lm import LevenbergMarquardt, Traced, covariance
@@ -52,6 +53,24 @@ def test_recovers_an_exponential_decay_from_a_poor_start():
     solver = LevenbergMarquardt(residual, torch.tensor([0.5, 0.5], dtype=torch.float64))
     theta = solver.run(200, tolerance=0.0)
     torch.testing.assert_close(theta, truth, rtol=1e-8, atol=1e-8)
+
+
+@pytest.mark.parametrize(("decrease", "most"), [(1 / 3, 43), (0.1, 33)])
+def test_a_parameter_whose_force_grows_e_fold_a_unit_is_crossed_in_fewer_steps_where_damping_falls_faster(
+    decrease, most
+):
+    # log K from the fluid-off start: F_D ∝ 1/K. Accepted steps have gain ≈ 1, and each moves θ by ln(1/cap) as
+    # the damping falls by the cap: 25 accepted of 43 steps at Nielsen's 1/3, 14 of 33 at Marquardt's 1/10.
+    t = torch.linspace(0.5, 2.0, 50, dtype=torch.float64)
+
+    def residual(theta):
+        return (torch.exp(-theta[0]) - 1.0) * t
+
+    solver = LevenbergMarquardt(residual, torch.tensor([16.0], dtype=torch.float64), decrease=decrease)
+    steps = []
+    solver.run(200, tolerance=1e-12, callback=steps.append)
+    assert abs(solver.theta.item()) < 1e-8
+    assert len(steps) == most
 
 
 def test_each_step_evaluates_the_model_once_its_jacobian_taken_from_the_accepted_trial():

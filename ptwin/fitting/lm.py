@@ -110,7 +110,8 @@ class Step:
 class LevenbergMarquardt:
     """Minimise ½‖residual(θ)‖². ``learning_rate``: one factor per entry of θ (default 1); ``trace``: θ ↦ the
     residual evaluated there, ``.value`` now and ``.jacobian_and_value()`` → (J, r) later, where the residual
-    knows a cheaper route than differentiating all of θ at once (default: ``Traced``)."""
+    knows a cheaper route than differentiating all of θ at once (default: ``Traced``); ``decrease``: the most
+    an accepted step lowers the damping by (Nielsen's 1/3)."""
 
     def __init__(
         self,
@@ -119,8 +120,10 @@ class LevenbergMarquardt:
         learning_rate: torch.Tensor | None = None,
         damping: float = 1e-3,
         trace: Callable[[torch.Tensor], Traced] | None = None,
+        decrease: float = 1 / 3,
     ):
         self.residual = residual
+        self.decrease = decrease
         self.trace = trace if trace is not None else (lambda theta: Traced(residual, theta))
         self.learning_rate = torch.ones_like(theta) if learning_rate is None else learning_rate.to(theta)
         self.state = {
@@ -183,7 +186,7 @@ class LevenbergMarquardt:
         if accepted:
             self._linear, self._traced = None, traced
             s["theta"] = candidate
-            s["damping"] = s["damping"] * max(1 / 3, 1 - (2 * gain.item() - 1) ** 3)
+            s["damping"] = s["damping"] * max(self.decrease, 1 - (2 * gain.item() - 1) ** 3)
             s["nu"] = torch.tensor(2.0, dtype=torch.float64)
             s["cost"] = new_cost.detach()
         else:
