@@ -20,7 +20,7 @@ from torch.func import functional_call
 from ptwin.fitting.lm import FitError, LevenbergMarquardt, ParameterVector, covariance
 from ptwin.physics.model import PERMEABILITY, PLAUSIBLE_PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
-from ptwin.physics.terms import VOCABULARY
+from ptwin.physics.terms import VOCABULARY, hidden_in_contacts
 
 # A step that lowers the LM cost ½χ² (noise units) by less than this, χ² by less than 1e-3, ends a fit:
 # 1000× below the unit a Δχ² is read in (an interval's 3.84, the information criterion's margin of 10),
@@ -284,7 +284,7 @@ def fit_with_starts(
         return fit_physics(make_model(terms), samples, index, iterations)
     starts = [dict(zip(terms, combo)) for combo in itertools.product(*(VOCABULARY[t].STARTS for t in terms))]
     fluid_off = () if all(VOCABULARY[t].fluid_only() for t in terms) else (PLAUSIBLE_PERMEABILITY[1],)
-    hidden = base is not None and any(VOCABULARY[t].CONTACT_CAVEAT for t in terms)
+    hidden = base is not None and hidden_in_contacts(terms)
     permeabilities = (None, base.permeability, *fluid_off) if hidden else (None, *fluid_off)
 
     def at(permeability):

@@ -72,8 +72,7 @@ class Term(nn.Module):
     ``KEPT_BY_COMMON_LEVEL`` (it stays a candidate after all where one common baseline level was
     removed from every curve: what it models is then still in the force),
     ``CONTACT_CAVEAT`` (what estimated contacts hide of it on approach curves, or None; a term with one grows
-    as √w from contact, and its fits start from where its shape puts the contacts, ``ModelFactory``, and from
-    the base model's K and optimum, ``fit_with_starts``),
+    as √w from contact, and its fits start apart, ``hidden_in_contacts``),
     ``TYPICAL`` (values samples of the field show: where ``python -m ptwin.inject`` starts its search for the
     smallest size a set could have shown, scaling the first, the term's strength).
     """
@@ -326,3 +325,10 @@ VOCABULARY: dict[str, type[Term]] = {
         ContactOffset,
     )
 }
+
+
+def hidden_in_contacts(terms: tuple[str, ...]) -> bool:
+    """Whether one of ``terms`` grows as √w from contact (``Term.CONTACT_CAVEAT``), so that estimated contacts
+    absorb its force at first order: its fits start where its shape puts the contacts (``ModelFactory``) and
+    from the base model (``fit_with_starts``)."""
+    return any(VOCABULARY[term].CONTACT_CAVEAT for term in terms)

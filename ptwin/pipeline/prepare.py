@@ -25,7 +25,7 @@ from ptwin.physics.elastic import ReferenceCurve
 from ptwin.physics.fluid_force import FluidForce
 from ptwin.physics.model import ForceModel
 from ptwin.physics.samples import Samples
-from ptwin.physics.terms import VOCABULARY
+from ptwin.physics.terms import hidden_in_contacts
 from ptwin.pipeline.settings import ModelSettings, Settings
 
 
@@ -59,7 +59,7 @@ class ModelFactory:
         meta = self.meta
         fluid = self._fluid.at(permeability or self.permeability)
         contact = ContactNuisance(self.contact_ids, self.reference_onset) if self.contact_ids is not None else None
-        if contact is not None and self.root_shifts and any(VOCABULARY[t].CONTACT_CAVEAT for t in terms):
+        if contact is not None and self.root_shifts and hidden_in_contacts(terms):
             contact.place(self.root_shifts, self.reference.curve)
         model = ForceModel(
             self.reference,
