@@ -130,6 +130,19 @@ class HeldOutPasses:
 HELD_OUT_PASSES = HeldOutPasses()
 
 
+class HeldOutFails:
+    """A held-out test no larger model passes."""
+
+    @staticmethod
+    def evidence(smaller, larger, label):
+        from ptwin.diagnosis.null import TermEvidence
+
+        return TermEvidence(label, 1.0, 10.0, 1.0, 0.01)
+
+
+HELD_OUT_FAILS = HeldOutFails()
+
+
 @pytest.mark.parametrize(("max_terms", "pair_whiteness", "largest"), [(3, 50.0, 3), (3, 2.0, 2), (1, 50.0, 1)])
 def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_structure(
     monkeypatch, max_terms, pair_whiteness, largest
@@ -320,6 +333,10 @@ def test_a_residual_within_the_noise_as_a_whole_names_a_term_it_is_not_noise_in_
     within = {"a": TermEvidence("a", 30.0, 40.0, 3.0, 0.005)}
     pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, within, HELD_OUT_PASSES)
     assert not pick.detected and pick.preferred == ("a",)
+    # Beyond in its own shape but pruned by the held-out test: the pruning is said, and not contradicted.
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, beyond, HELD_OUT_FAILS)
+    assert not pick.detected and pick.preferred == ("a",)
+    assert pick.notes[0].startswith("a pruned") and "do not bear it out" in pick.notes[-1]
     # Nor is it preferred where it won the BIC by running K to 1e25 m² (a degenerate parametrisation).
     candidates[("a",)].fit.permeability = 1e25
     pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, within, HELD_OUT_PASSES)

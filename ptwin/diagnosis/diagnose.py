@@ -268,6 +268,7 @@ def _select(
             )
         return _Selection(True, unexplained=True, notes=notes)
     proven = [label for label, e in evidence.items() if e.beyond]
+    pruned = []  # why a subset beyond the noise in its own shape is not named: the held-out test pruned it
     if proven:
         # the fewest terms whose own shape is beyond the noise: a pair is weighed only where no single is
         size = min(label.count(" + ") + 1 for label in proven)
@@ -279,20 +280,23 @@ def _select(
                 f"{shape.term} it is not: {shape.words()}"
             )
             return _Selection(False, chosen, notes=notes)
+        pruned = notes
     better = [
         c
         for t, c in candidates.items()
         if len(t) == 1 and c.usable and c.fit.plausible and base.fit.bic - c.fit.bic >= s.bic_margin
     ]
     if not better:
-        return _Selection(False)
+        return _Selection(False, notes=pruned)
     best = min(better, key=lambda c: c.fit.bic)
+    shape = evidence[best.terms[0]]
     why = (
         f"{best.terms[0]} lowers the BIC by {base.fit.bic - best.fit.bic:.0f}, but the base model's residual is "
-        f"within the noise ({test.words(base.whiteness)}), and {evidence[best.terms[0]].words()}: not named, "
-        "listed beside the base model"
+        f"within the noise ({test.words(base.whiteness)}), and {shape.words()}"
+        + ("; the validation samples do not bear it out (above)" * shape.beyond)
+        + ": not named, listed beside the base model"
     )
-    return _Selection(False, preferred=best.terms, notes=[why])
+    return _Selection(False, preferred=best.terms, notes=[*pruned, why])
 
 
 def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings, held_out: HeldOutTest) -> list[tuple[str, ...]]:
