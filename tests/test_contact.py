@@ -26,6 +26,23 @@ def test_contact_offset_and_tilt_are_found(spring_constant, tilt):
     assert np.abs(corrected[travel < -0.3e-6]).mean() < 2e-11  # the baseline is gone: noise is left
 
 
+def test_an_approach_that_starts_ringing_has_its_baseline_read_where_it_has_settled():
+    # Public agarose approaches ring for their first 10–30% (up to 170 pN in 50-sample blocks, 12 pN after): the
+    # same curve as above with a 500 pN ring of 40 samples' period, decaying over 5% of its samples, gives the same
+    # contact, tilt and level (read with the ring: the level 26 pN off).
+    setting = {**SOFT_CANTILEVER, "base_speeds": (5e-6,), "noise_correlation": 0.2, "contact_error": 2e-7}
+    experiment = Experiment(**{**setting, "spring_constant": 0.088, "tilt": 5e-4, "baseline_offset": 3e-10})
+    _, curves = simulate(experiment)
+    _, offset, error = np.random.default_rng([0, 1]).standard_normal(3)
+    z, force = curves["z"].to_numpy(), curves["force"].to_numpy()
+    steps = np.arange(z.size)
+    ring = 5e-10 * np.exp(-steps / (0.05 * z.size)) * np.sin(2 * np.pi * steps / 40.0)
+    baseline = estimate_baseline(z, force + ring, 0.088)
+    assert baseline.contact_z == pytest.approx(2e-7 * error, abs=10e-9)
+    assert baseline.tilt == pytest.approx(5e-4, abs=5e-5)
+    assert baseline.offset == pytest.approx(3e-10 * offset + 5e-4 * (baseline.contact_z - 2e-7 * error), abs=1e-11)
+
+
 def test_levels_are_kept_as_drag_only_where_they_rise_with_speed_beyond_free_offsets():
     # Five curves, levels σ = 0.2 nN apart from their line. Free offsets of 1 nN's spread, drawn 2000 times: how
     # often they pass for drag (one level plus b·speed within χ², b beyond t(3)'s 99%) is the stated 1% at most;

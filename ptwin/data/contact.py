@@ -1,7 +1,8 @@
 """Where a curve's contact point is unknown (``contact_point: estimate``, vendor imports):
 its estimate, and the baseline offset and tilt removed from its force.
 
-1. A first baseline: a straight line force(z) over the first fifth of the travel; the
+1. A first baseline: a straight line force(z) over the first fifth of the travel (from where
+   it has settled, if the approach starts ringing: ``ptwin.data.noise.settled``); the
    contact guess is where the force leaves it for good (more than ``DEPARTURE`` robust
    standard deviations above it from there on).
 2. The baseline: the line refitted over the first 75% of the travel before that guess
@@ -41,7 +42,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.stats
 
-from ptwin.data.noise import fit_correlation, model_inflation, robust_std
+from ptwin.data.noise import fit_correlation, model_inflation, robust_std, settled
 
 DEPARTURE = 5.0  # robust standard deviations above the first baseline where contact has begun
 SCAN = 101  # candidate contact depths per grid of the refinement
@@ -78,7 +79,10 @@ class NoBaseline(ValueError):
 
 def estimate_baseline(z: np.ndarray, force: np.ndarray, spring_constant: float) -> Baseline:
     """The contact and baseline of an approach (``z`` increasing into the sample [m], ``force`` [N])."""
-    first = z <= z[0] + 0.2 * (z[-1] - z[0])
+    # Where the approach starts ringing, the baseline is read from where it has settled (``noise.settled``).
+    start = settled(force[: z.size // 2])
+    settled_from = np.arange(z.size) >= start
+    first = settled_from & (z <= z[start] + 0.2 * (z[-1] - z[0]))
     if first.sum() < 10:
         raise NoBaseline("fewer than 10 samples in the first fifth of the travel")
     tilt, intercept = np.polyfit(z[first], force[first], 1)
@@ -86,7 +90,7 @@ def estimate_baseline(z: np.ndarray, force: np.ndarray, spring_constant: float) 
     spread = robust_std(excess[first])
     below = np.flatnonzero(excess <= DEPARTURE * spread)
     guess = int(below[-1]) + 1 if below.size else 0
-    free = z <= z[0] + 0.75 * (z[min(guess, z.size - 1)] - z[0])
+    free = settled_from & (z <= z[start] + 0.75 * (z[min(guess, z.size - 1)] - z[start]))
     if free.sum() < 10:
         raise NoBaseline("the force leaves the baseline within the first 10 samples")
     tilt, intercept = np.polyfit(z[free], force[free], 1)
