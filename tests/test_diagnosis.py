@@ -391,3 +391,22 @@ def test_no_structure_is_said_as_what_the_test_found_not_as_a_model_that_fits(ra
     sentence = summarise(d, None, ABOVE_FIVE)
     assert "explains every curve" not in sentence and f"validation RMS {ratio:.2f}× the noise std" in sentence
     assert ("cannot tell from what their noise could leave" in sentence) == warned
+
+
+def test_a_rival_whose_k_stayed_at_the_top_of_the_field_gives_that_limit_not_a_value():
+    # Real agarose C with 5 Pa·s added: power_law_rheology's fit stayed at its fluid-off start, K = 1e-9 m², where
+    # no fluid force is left to fix K. The summary said '1e-09 m² with power_law_rheology', a value it is not.
+    from types import SimpleNamespace
+
+    from ptwin.diagnosis.words import _permeability_not_fixed
+
+    groups = [
+        {"permeability": {"base model": 8.29e-16, "solid_viscosity": 2.7e-15}},
+        {"permeability": {"base model": 8.29e-16, "power_law_rheology": 1e-9}},
+    ]
+    sentence = _permeability_not_fixed(
+        SimpleNamespace(confounded=groups, permeability={"corrected_interval": [None, None]})
+    )
+    assert "2.7e-15 m² with solid_viscosity" in sentence
+    assert "K at the field's 1e-09 m² limit with power_law_rheology (no fluid force" in sentence
+    assert "1e-09 m² with" not in sentence

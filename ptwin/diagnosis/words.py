@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import math
 
+from ptwin.physics.model import PLAUSIBLE_PERMEABILITY
+
 MICRO = 1e6
 MATERIAL = 0.02  # a relative difference in K worth saying that K is not fixed
 UNRESOLVED = 2.0  # a validation RMS (× the noise std) worth a sentence where no structure is found
@@ -113,10 +115,20 @@ def _permeability_not_fixed(d) -> str:
     finite = [k for k in ks.values() if math.isfinite(k) and k > 0]
     if len(finite) < 2 or max(finite) / min(finite) - 1 <= MATERIAL:
         return ""
-    listing = ", ".join(f"{number(k, '.3g')} m² with {_called(name)}" for name, k in ks.items())
+    listing = ", ".join(_permeability_with(k, _called(name)) for name, k in ks.items())
     low, high = d.permeability["corrected_interval"]
     covers = "" if low is None or high is None else f"; its 95% interval [{low:.3g}, {high:.3g}] m² covers them"
     return f" K is not fixed by these data: {listing}{covers}."
+
+
+def _permeability_with(k: float, name: str) -> str:
+    """'2.7e-15 m² with solid_viscosity'; a K within 1% of the top of the field's range is that limit, no value:
+    fits start there to try a model without fluid (``physics_fit.fit_with_starts``), and one that stays there has
+    no fluid force left to fix K by."""
+    high = PLAUSIBLE_PERMEABILITY[1]
+    if k >= 0.99 * high:
+        return f"K at the field's {high:.0e} m² limit with {name} (no fluid force: any larger K fits as well)"
+    return f"{number(k, '.3g')} m² with {name}"
 
 
 def _called(name: str) -> str:
