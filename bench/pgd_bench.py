@@ -19,7 +19,7 @@ from ptwin.physics.fluid_force import FluidForce
 
 def preset(name: str) -> dict:
     values = yaml.safe_load(open(f"configs/pgd/{name}.yaml"))
-    parents = [d for d in values.pop("defaults") if d not in ("schema", "_self_")]
+    parents = [d for d in values.pop("defaults", []) if d not in ("schema", "_self_")]
     merged = {}
     for parent in parents:
         merged.update(preset(parent))
