@@ -7,8 +7,6 @@ from ptwin.data.contact import estimate_baseline, levels_with_speed
 from ptwin.synth.presets import SOFT_CANTILEVER
 from ptwin.synth.simulator import Experiment, simulate
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
-
 
 @pytest.mark.parametrize(("spring_constant", "tilt"), [(0.088, 5e-4), (2.88, 0.0), (0.088, -1e-3)])
 def test_contact_offset_and_tilt_are_found(spring_constant, tilt):

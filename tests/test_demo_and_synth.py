@@ -11,7 +11,6 @@ from ptwin.data.recordings import load_recordings
 from ptwin.synth.cli import main
 
 DEMO = Path(__file__).parent.parent / "data"
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 
 
 def test_demo_loads_and_its_noise_floor_is_the_truth():

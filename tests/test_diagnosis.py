@@ -8,8 +8,6 @@ import pytest
 from ptwin.diagnosis.locate import whiteness
 from ptwin.fitting.split import Split
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
-
 
 def test_whiteness_is_one_for_noise_and_large_for_structure():
     import torch

@@ -10,8 +10,6 @@ from ptwin.physics.elastic import ReferenceCurve, hertz_force
 from ptwin.physics.model import ForceModel
 from ptwin.synth.simulator import Experiment, simulate
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
-
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):

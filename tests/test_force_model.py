@@ -14,8 +14,6 @@ from ptwin.physics.model import ForceModel, smooth_contact_radius
 from ptwin.physics.samples import Samples
 from tests.conftest import simulated_set
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
-
 TRUTHS = {
     "solid_viscosity": {"gamma": 5.0},
     "solid_relaxation": {"g": 0.1, "tau": 0.5},

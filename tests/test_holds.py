@@ -18,8 +18,6 @@ from ptwin.pipeline.prepare import UnsupportedSet, prepare
 from ptwin.synth.simulator import Experiment, Hold, simulate, simulate_curve
 from tests.conftest import settings_for
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
-
 
 def test_relaxation_after_a_ramp_decays_as_the_closed_form():
     # F_el rises linearly (slope a) for T, then holds: q = a·τ(1 − e^{−T/τ})·e^{−(t−T)/τ} after it; a short

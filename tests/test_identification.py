@@ -19,7 +19,6 @@ from ptwin.pipeline.run import _design
 from ptwin.synth.simulator import Experiment, simulate_curve
 from tests.conftest import settings_for, simulated_set
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 TRUE_K = 2.0e-16
 
 

@@ -219,7 +219,6 @@ def test_one_vendor_approach_is_refused_in_one_line_saying_what_to_record(tmp_pa
 
 
 @pytest.mark.slow  # ~30 s: 6000 samples of a real creep through the whole chain
-@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 def test_the_vendor_creep_is_diagnosed_in_its_creep(tmp_path, coarse_cache):
     # The creep is a set of its own: its approach is the elastic law, its creep the data, and the base model
     # misses it in the creep, deeper than the approach went.

@@ -18,7 +18,6 @@ from ptwin.pipeline.forcemap import run_map
 from ptwin.synth.cli import main as synth
 from tests.conftest import CONFIGS
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 SPEEDS = ("2e-6", "8e-6", "40e-6")
 
 

@@ -8,8 +8,6 @@ from ptwin.data.recordings import write_recordings
 from ptwin.synth.simulator import Experiment, Hold, simulate
 from tests.conftest import run
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
-
 
 @pytest.mark.parametrize(
     "effects",

@@ -8,7 +8,6 @@ from ptwin.synth.presets import SOFT_CANTILEVER
 from ptwin.synth.simulator import Experiment, Hold, simulate
 from tests.conftest import run, simulated_set
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 HEREDITARY = "diagnosis.terms=[solid_relaxation,pore_pressure_relaxation,power_law_rheology]"
 QUICK = ("optim.hybrid.regularisations=[1.0e-2]", "optim.hybrid.iterations=10", HEREDITARY)
 PERMEABILITY = Experiment().permeability

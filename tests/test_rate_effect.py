@@ -9,7 +9,6 @@ from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.synth.simulator import Experiment, simulate
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 # A stiff cantilever at three speeds on a gel too permeable for Darcy to show: the tip follows the base, so
 # a power law scales the force at equal depth by (v/v_ref)^alpha exactly (Ting's integral on a ramp), and a
 # Kelvin–Voigt network adds π·γ·R·v.

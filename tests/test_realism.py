@@ -16,7 +16,6 @@ from ptwin.synth.presets import SOFT_CANTILEVER
 from ptwin.synth.simulator import Experiment, simulate
 from tests.conftest import run
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 SOFT = SOFT_CANTILEVER
 QUICK = ("optim.hybrid.regularisations=[1.0e-2]", "optim.hybrid.iterations=10")
 

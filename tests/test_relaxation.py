@@ -10,8 +10,6 @@ from ptwin.data.relaxation import relaxations
 from ptwin.pgd.reference import force_coefficient
 from ptwin.synth.simulator import Experiment, Hold, simulate
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
-
 
 def held(tmp_path, effects, speed=20e-6, **experiment):
     experiment = Experiment(

@@ -10,7 +10,6 @@ from ptwin.physics.elastic import hertz_force
 from ptwin.synth.simulator import Experiment, simulate, simulate_curve
 
 # scipy's numerical Jacobian overflows harmlessly on the stiff contact transient.
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 
 
 def fast(**changes):

@@ -10,7 +10,6 @@ import torch
 from ptwin.fitting import checkpoint
 from tests.conftest import CONFIGS, run, simulated_set
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 TRUE_K = 2.0e-16
 
 

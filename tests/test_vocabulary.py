@@ -7,8 +7,6 @@ from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.physics.terms import VOCABULARY, Parameter, Term
 from tests.conftest import run, simulated_set
 
-pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
-
 
 class RateStiffening(Term):
     """A toy: + c · base_speed · w (c [N s/m²]), a force growing with speed and depth."""
