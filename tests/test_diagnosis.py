@@ -406,5 +406,44 @@ def test_a_rival_whose_k_stayed_at_the_top_of_the_field_gives_that_limit_not_a_v
         SimpleNamespace(confounded=groups, permeability={"corrected_interval": [None, None]})
     )
     assert "2.7e-15 m² with solid_viscosity" in sentence
-    assert "K at the field's 1e-09 m² limit with power_law_rheology (no fluid force" in sentence
+    assert "K at the field's 1e-09 m² limit or beyond with power_law_rheology (no fluid force" in sentence
     assert "1e-09 m² with" not in sentence
+
+
+def test_k_gets_a_standard_error_only_where_its_interval_is_its_own_fit_s(monkeypatch):
+    # Real PAAm C as recorded: K 5.7e-16 ± 14% (Wald) beside a 95% interval of [6.6e-18, 4.3e-13] m², widened to
+    # cover two rivals' K. The std is the one fit's curvature, no statement of the data: null beside rivals.
+    import math
+    from types import SimpleNamespace
+
+    import ptwin.diagnosis.diagnose as diagnose
+
+    base, rival = candidate((), 1000.0, 1e-9), candidate(("a",), 1000.0, 1e-9)
+    rival.fit.permeability, rival.fit.permeability_std = 1.7e-15, 1.5e-15
+    context = SimpleNamespace(corrected=base, candidates={(): base})
+    monkeypatch.setattr(diagnose, "_raw_interval", lambda *args: (math.log(2.5e-16), math.log(3.5e-16)))
+    alone = diagnose._permeability(context, [], unexplained=False)
+    beside = diagnose._permeability(context, [rival], unexplained=False)
+    assert alone["corrected_std"] == 3e-17 and alone["corrected_interval"][1] == pytest.approx(3.5e-16)
+    assert beside["corrected_std"] is None and beside["corrected_interval"][1] > 1.7e-15
+
+
+def test_an_unexplained_k_that_ran_past_the_field_is_said_as_that_limit():
+    # Real agarose B as recorded: the base model ran K to 1.58e-9 m² (no fluid force); the summary gave it as a value.
+    from ptwin.diagnosis.words import _permeability
+
+    assert _permeability(1.58e-9) == "at the field's 1e-09 m² limit or beyond: no fluid force"
+    assert _permeability(2.9e-16) == "2.9e-16 m²"
+
+
+def test_the_printed_table_gives_k_s_interval_where_rivals_leave_it_no_std():
+    from ptwin.reporting.report import print_summary
+
+    lines = []
+    diagnosis = {
+        "fit": {"corrected": {"val_rmse": 2e-11, "test_rmse": 2e-11}},
+        "permeability": {"corrected": 5.71e-16, "corrected_std": None, "corrected_interval": [6.62e-18, 4.29e-13]},
+        "mismatch": {"summary": "…"},
+    }
+    print_summary({"stages": {}, "noise_floor": 1.3e-11}, diagnosis, lines.append)
+    assert "5.71e-16 [6.6e-18, 4.3e-13]" in lines[1]

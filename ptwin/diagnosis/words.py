@@ -12,6 +12,7 @@ from ptwin.physics.model import PLAUSIBLE_PERMEABILITY
 
 MICRO = 1e6
 MATERIAL = 0.02  # a relative difference in K worth saying that K is not fixed
+NO_FLUID = f"at the field's {PLAUSIBLE_PERMEABILITY[1]:.0e} m² limit or beyond"  # where K leaves no fluid force
 UNRESOLVED = 2.0  # a validation RMS (× the noise std) worth a sentence where no structure is found
 
 
@@ -78,7 +79,7 @@ def _findings(d, apparent, test) -> str:
     if d.unexplained:
         kept = "the hybrid network's correction is kept, and " if d.fit["hybrid"]["val_rmse"] is not None else ""
         return sentence + (
-            f"No term of the vocabulary explains the residual: {kept}K ({d.permeability['corrected']:.3g} m²) "
+            f"No term of the vocabulary explains the residual: {kept}K ({_permeability(d.permeability['corrected'])}) "
             "comes from a model that misses the data, so no interval is given."
         )
     entries = d.left_out
@@ -121,13 +122,22 @@ def _permeability_not_fixed(d) -> str:
     return f" K is not fixed by these data: {listing}{covers}."
 
 
+def _fluid_off(k: float) -> bool:
+    """K within 1% of the top of the field's range, or beyond: fits start there to try a model without fluid
+    (``physics_fit.fit_with_starts``), and one that stays there, or runs past it, has no fluid force left to fix
+    K by. Such a K is no value but that limit (``NO_FLUID``)."""
+    return k >= 0.99 * PLAUSIBLE_PERMEABILITY[1]
+
+
+def _permeability(k: float) -> str:
+    """'2.7e-15 m²', or the limit a K without fluid force sits at."""
+    return f"{NO_FLUID}: no fluid force" if _fluid_off(k) else f"{number(k, '.3g')} m²"
+
+
 def _permeability_with(k: float, name: str) -> str:
-    """'2.7e-15 m² with solid_viscosity'; a K within 1% of the top of the field's range is that limit, no value:
-    fits start there to try a model without fluid (``physics_fit.fit_with_starts``), and one that stays there has
-    no fluid force left to fix K by."""
-    high = PLAUSIBLE_PERMEABILITY[1]
-    if k >= 0.99 * high:
-        return f"K at the field's {high:.0e} m² limit with {name} (no fluid force: any larger K fits as well)"
+    """'2.7e-15 m² with solid_viscosity', or the limit a K without fluid force sits at."""
+    if _fluid_off(k):
+        return f"K {NO_FLUID} with {name} (no fluid force: any larger K fits as well)"
     return f"{number(k, '.3g')} m² with {name}"
 
 

@@ -41,6 +41,8 @@ def print_summary(results: dict, diagnosis: dict, progress=print) -> None:
     corrected = _k(permeability["corrected"], permeability["corrected_std"])
     if one_sided((low, high)):  # the bound is all the data say
         corrected = f"< {high:.4g}" if low is None else f"> {low:.4g}"
+    elif permeability["corrected_std"] is None and low is not None:  # rivals widened it: the interval, no std
+        corrected = f"{number(permeability['corrected'], '.3g')} [{low:.2g}, {high:.2g}]"
     rows.append(("diagnosis: corrected", corrected, _nano(fit["val_rmse"]), _nano(fit["test_rmse"])))
     progress(f"{'stage':<26s} {'K [m²]':>24s} {'val RMSE nN':>12s} {'test RMSE nN':>13s}")
     for row in rows:
