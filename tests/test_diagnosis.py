@@ -430,10 +430,10 @@ def test_k_gets_a_standard_error_only_where_its_interval_is_its_own_fit_s(monkey
 
 def test_an_unexplained_k_that_ran_past_the_field_is_said_as_that_limit():
     # Real agarose B as recorded: the base model ran K to 1.58e-9 m² (no fluid force); the summary gave it as a value.
-    from ptwin.diagnosis.words import _permeability
+    from ptwin.diagnosis.words import permeability_words
 
-    assert _permeability(1.58e-9) == "at the field's 1e-09 m² limit or beyond: no fluid force"
-    assert _permeability(2.9e-16) == "2.9e-16 m²"
+    assert permeability_words(1.58e-9) == "at the field's 1e-09 m² limit or beyond: no fluid force"
+    assert permeability_words(2.9e-16) == "2.9e-16 m²"
 
 
 def test_the_printed_table_gives_k_s_interval_where_rivals_leave_it_no_std():
@@ -447,3 +447,16 @@ def test_the_printed_table_gives_k_s_interval_where_rivals_leave_it_no_std():
     }
     print_summary({"stages": {}, "noise_floor": 1.3e-11}, diagnosis, lines.append)
     assert "5.71e-16 [6.6e-18, 4.3e-13]" in lines[1]
+
+
+def test_the_identification_table_gives_no_k_the_data_cannot_fix():
+    # Real agarose B as recorded: stage 1 read '1.579e-09 ± 0.00034', a K past the field with a std 2e5 times it.
+    from ptwin.reporting.report import summary_rows
+
+    stages = {
+        "elastic_darcy": {"permeability": 1.579e-9, "permeability_std": 3.4e-4, "val_rmse": 3e-11, "test_rmse": 3e-11},
+        "viscous": {"permeability": 2.0e-16, "permeability_std": 5e-16, "val_rmse": 3e-11, "test_rmse": 3e-11},
+        "hybrid": {"permeability": 2.0e-16, "permeability_std": 1e-17, "val_rmse": 2e-11, "test_rmse": 2e-11},
+    }
+    rows = [row[1] for row in summary_rows({"stages": stages})]
+    assert rows == ["no fluid force: ≥ 1e-09", "2e-16 (not fixed)", "2e-16 ± 1e-17"]

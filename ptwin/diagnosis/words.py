@@ -78,9 +78,10 @@ def _findings(d, apparent, test) -> str:
     sentence = _where(d, ratio, test) + _trend(apparent)
     if d.unexplained:
         kept = "the hybrid network's correction is kept, and " if d.fit["hybrid"]["val_rmse"] is not None else ""
+        k = permeability_words(d.permeability["corrected"])
         return sentence + (
-            f"No term of the vocabulary explains the residual: {kept}K ({_permeability(d.permeability['corrected'])}) "
-            "comes from a model that misses the data, so no interval is given."
+            f"No term of the vocabulary explains the residual: {kept}K ({k}) comes from a model that misses the "
+            "data, so no interval is given."
         )
     entries = d.left_out
     names = " and ".join(entry["term"] for entry in entries)
@@ -122,21 +123,21 @@ def _permeability_not_fixed(d) -> str:
     return f" K is not fixed by these data: {listing}{covers}."
 
 
-def _fluid_off(k: float) -> bool:
+def fluid_off(k: float) -> bool:
     """K within 1% of the top of the field's range, or beyond: fits start there to try a model without fluid
     (``physics_fit.fit_with_starts``), and one that stays there, or runs past it, has no fluid force left to fix
     K by. Such a K is no value but that limit (``NO_FLUID``)."""
     return k >= 0.99 * PLAUSIBLE_PERMEABILITY[1]
 
 
-def _permeability(k: float) -> str:
+def permeability_words(k: float | None, spec: str = ".3g") -> str:
     """'2.7e-15 m²', or the limit a K without fluid force sits at."""
-    return f"{NO_FLUID}: no fluid force" if _fluid_off(k) else f"{number(k, '.3g')} m²"
+    return f"{NO_FLUID}: no fluid force" if k is not None and fluid_off(k) else f"{number(k, spec)} m²"
 
 
 def _permeability_with(k: float, name: str) -> str:
     """'2.7e-15 m² with solid_viscosity', or the limit a K without fluid force sits at."""
-    if _fluid_off(k):
+    if fluid_off(k):
         return f"K {NO_FLUID} with {name} (no fluid force: any larger K fits as well)"
     return f"{number(k, '.3g')} m² with {name}"
 

@@ -8,13 +8,20 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ptwin.diagnosis.words import bounded, number, one_sided
+from ptwin.diagnosis.words import bounded, fluid_off, number, one_sided, permeability_words
+from ptwin.physics.model import PLAUSIBLE_PERMEABILITY
 
 NANO = 1e9
 LABELS = {"elastic_darcy": "1 elastic + Darcy", "viscous": "2 + viscous (K, gamma)", "hybrid": "3 hybrid twin"}
 
 
 def _k(value, std=None) -> str:
+    """K [m²] ± its std, as far as the data fix it: a K without fluid force is the field's limit, and a std
+    larger than K itself bounds nothing (the table has no room for the interval)."""
+    if value is not None and fluid_off(value):
+        return f"no fluid force: ≥ {PLAUSIBLE_PERMEABILITY[1]:.0e}"
+    if std is not None and value is not None and std > value:
+        return f"{number(value, '.4g')} (not fixed)"
     return number(value, ".4g") + (f" ± {number(std, '.2g')}" if std is not None else "")
 
 
@@ -142,7 +149,7 @@ def _fit(payload: dict) -> list[str]:
         f"Noise: std {_nano(noise['std'])} nN, correlation time {correlation} ms, block-variance inflation "
         f"{number(noise['inflation'], '.2f')} (from the {noise['source']}); every statistic above uses it.",
         "",
-        f"Permeability: base {number(p['base'], '.4g')} m², corrected {_corrected_k(payload)}.",
+        f"Permeability: base {permeability_words(p['base'], '.4g')}, corrected {_corrected_k(payload)}.",
         "",
         "| model | val RMSE [nN] | test RMSE [nN] | test / noise std |",
         "|---|---|---|---|",
@@ -157,7 +164,7 @@ def _corrected_k(payload: dict) -> str:
     """The corrected K as the data fix it; none from a model that leaves the data unexplained."""
     p = payload["permeability"]
     if payload["unexplained"]:
-        return f"{number(p['corrected'], '.4g')} m² (from a model that misses the data: no interval holds)"
+        return f"{permeability_words(p['corrected'], '.4g')} (from a model that misses the data: no interval holds)"
     return bounded(p["corrected"], p["corrected_interval"], ".4g", " m²")
 
 
