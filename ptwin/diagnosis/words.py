@@ -139,7 +139,7 @@ def _permeability_with(k: float, name: str) -> str:
     """'2.7e-15 m² with solid_viscosity', or the limit a K without fluid force sits at."""
     if fluid_off(k):
         return f"K {NO_FLUID} with {name} (no fluid force: any larger K fits as well)"
-    return f"{number(k, '.3g')} m² with {name}"
+    return f"{permeability_words(k)} with {name}"
 
 
 def _called(name: str) -> str:
