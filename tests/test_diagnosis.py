@@ -165,7 +165,12 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     samples = type(
         "Samples",
         (),
-        {"force": torch.zeros(10), "in_contact": torch.ones(10, dtype=torch.bool), "noise_floor": torch.ones(10)},
+        {
+            "force": torch.zeros(10),
+            "in_contact": torch.ones(10, dtype=torch.bool),
+            "pins_contact": torch.zeros(10, dtype=torch.bool),
+            "noise_floor": torch.ones(10),
+        },
     )()
     split = Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
     name.fit_candidates(None, samples, split, ["a", "b", "c"], max_terms, 1, 50, ABOVE_FIVE, progress=lambda line: None)
@@ -202,7 +207,12 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
     samples = type(
         "Samples",
         (),
-        {"force": torch.zeros(10), "in_contact": torch.ones(10, dtype=torch.bool), "noise_floor": torch.ones(10)},
+        {
+            "force": torch.zeros(10),
+            "in_contact": torch.ones(10, dtype=torch.bool),
+            "pins_contact": torch.zeros(10, dtype=torch.bool),
+            "noise_floor": torch.ones(10),
+        },
     )()
     split = Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
     name.fit_candidates(None, samples, split, ["a", "b", "c"], 2, 1, 50, ABOVE_FIVE, progress=lambda line: None)
@@ -247,7 +257,12 @@ def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_te
     samples = type(
         "Samples",
         (),
-        {"force": torch.zeros(10), "in_contact": torch.ones(10, dtype=torch.bool), "noise_floor": torch.ones(10)},
+        {
+            "force": torch.zeros(10),
+            "in_contact": torch.ones(10, dtype=torch.bool),
+            "pins_contact": torch.zeros(10, dtype=torch.bool),
+            "noise_floor": torch.ones(10),
+        },
     )()
     split = Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
     name.fit_candidates(

@@ -196,3 +196,56 @@ def test_a_terms_held_out_gain_exceeds_noise_and_model_error_at_most_as_often_as
     assert np.mean([e.beyond for e in _held_out_draws(test, shape, draws, validation, 0 * tolerated)]) <= 0.1
     assert np.mean([e.beyond for e in _held_out_draws(test, shape, draws, validation, tolerated)]) <= 0.1
     assert np.mean([e.beyond for e in _held_out_draws(test, shape, draws, validation, 3 * tolerated)]) >= 0.95
+
+
+def test_the_held_out_test_with_samples_pinning_contacts_keeps_its_false_alarm_rate():
+    # Where contacts are estimated, the held-out test has a second part on the validation samples before contact
+    # (name.HeldOutTest.pinning), each part at α/2. One term acting on both (in contact a smooth shape, before it
+    # a contact shift's ramp), fitted by least squares on the train samples of both to noise (+ a tolerated model
+    # error shaped like it): kept at most α (10%) of the time. A term the contact nuisances absorb in contact (its
+    # shape there zero) that is five times the tolerated size before contact (90 validation samples there): kept
+    # nearly always (0%, 2.2% and 99% when written).
+    from types import SimpleNamespace
+
+    from ptwin.diagnosis.name import Candidate, HeldOutTest
+
+    rng = np.random.default_rng(17)
+    test, shape, draws = _smooth_term_in_ar_noise(rng, 400)
+    inflation = max(1.0, model_inflation(SHARE, MEMORY, BLOCK))
+    noise = NoiseModel(2e-10, SHARE * MEMORY, inflation, 0.0, "known", 0, SHARE, MEMORY)
+    before = flat_samples(3, 200, 2e-10, inflation)
+    pinning = structure_test(before, torch.arange(600), None, noise, BLOCK, 0.1)
+    ramp = np.tile(np.linspace(0.0, 1.0, 200) ** 2, 3)
+    pinning_draws = np.stack(
+        [
+            np.sqrt(1 - SHARE) * rng.standard_normal(600) + np.sqrt(SHARE) * correlated_noise(rng, 600, 1.0, MEMORY)
+            for _ in range(400)
+        ],
+        axis=1,
+    )
+    validation, pinning_validation = rng.random(3000) < 0.15, rng.random(600) < 0.15
+    held_out = HeldOutTest(test, validation, 0.1, pinning, pinning_validation)
+    smaller_fit, larger_fit = SimpleNamespace(params={}), SimpleNamespace(params={"term": {"size": 1.0}})
+
+    def kept(contact_shape, pinning_shape, contact_error, pinning_error):
+        train = np.concatenate([~validation, ~pinning_validation])
+        both = np.concatenate([contact_shape, pinning_shape])
+        outcomes = []
+        for column in np.concatenate([draws + contact_error[:, None], pinning_draws + pinning_error[:, None]]).T:
+            size = (both[train] @ column[train]) / max(both[train] @ both[train], 1e-300)
+            smaller = Candidate((), smaller_fit, 1.0, 1.0, residual=column[:3000], pinning=column[3000:])
+            larger = Candidate(
+                ("term",),
+                larger_fit,
+                1.0,
+                1.0,
+                residual=(column - size * both)[:3000],
+                pinning=(column - size * both)[3000:],
+            )
+            outcomes.append(held_out.evidence(smaller, larger, "term").beyond)
+        return np.mean(outcomes)
+
+    tolerated, tolerated_before = (MODEL_ERROR * s / np.sqrt(np.mean(s**2)) for s in (shape, ramp))
+    assert kept(shape, ramp, 0 * shape, 0 * ramp) <= 0.1
+    assert kept(shape, ramp, tolerated, tolerated_before) <= 0.1
+    assert kept(0 * shape, ramp, 0 * shape, 5 * tolerated_before) >= 0.95

@@ -163,7 +163,7 @@ def diagnose(
     base = candidates[()]
     twin = _twin_rmse(hybrid, samples, split)
     evidence = shape_evidence(candidates, test)
-    held_out = HeldOutTest(test, torch.isin(seen, split.val).cpu().numpy(), s.false_alarm)
+    held_out = _held_out_test(samples, split, seen, test, noise, s)
     pick = _select(candidates, s, test, twin["val_rmse"], noise.std, evidence, held_out)
     with torch.no_grad():
         base_residual = base.fit.model(samples)[seen] - samples.force[seen]
@@ -209,6 +209,20 @@ def diagnose(
     )
     diagnosis.summary = summarise(diagnosis, apparent, test)
     return diagnosis
+
+
+def _held_out_test(
+    samples: Samples, split: Split, seen: torch.Tensor, test: StructureTest, noise: NoiseModel, s: DiagnosisSettings
+) -> HeldOutTest:
+    """The held-out test on the validation samples ``seen`` judges, and on those pinning estimated contacts where
+    there are some (the null there is the noise model's alone: no elastic law before contact)."""
+    validation = torch.isin(seen, split.val).cpu().numpy()
+    pins = split.pinning(samples)
+    pinning_validation = torch.isin(pins, split.val).cpu().numpy()
+    if not pinning_validation.any():
+        return HeldOutTest(test, validation, s.false_alarm)
+    pinning = structure_test(samples, pins, None, noise, s.block, s.false_alarm)
+    return HeldOutTest(test, validation, s.false_alarm, pinning, pinning_validation)
 
 
 @dataclass

@@ -44,6 +44,7 @@ class Candidate:
     whiteness: float  # of the residual on train + val, in units of the noise model
     failure: str | None = None  # why the fit failed
     residual: np.ndarray | None = None  # model − measured on the judged samples (noise units); None: failed
+    pinning: np.ndarray | None = None  # model − measured on the samples pinning an estimated contact (noise units)
 
     @property
     def usable(self) -> bool:
@@ -92,12 +93,12 @@ def fit_candidates(
     ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are.
     """
     fitted = fitted or {}
-    seen = split.judged(samples)
+    judged = split.judged(samples), split.pinning(samples)
     candidates = {}
 
     def add(subset):
         base = candidates[()].fit if () in candidates else None
-        candidate = _candidate(subset, fitted.get(subset), make_model, samples, split, seen, iterations, block, base)
+        candidate = _candidate(subset, fitted.get(subset), make_model, samples, split, judged, iterations, block, base)
         candidates[subset] = candidate
         name = " + ".join(subset) or "base"
         figures = f"BIC {candidate.fit.bic:12.1f}  val RMS {candidate.val_rmse * 1e9:7.3f} nN" if candidate.fit else ""
@@ -157,16 +158,35 @@ def _preferred(candidates: dict, size: int, bic_margin: float) -> list[tuple[str
     ]
 
 
-def _candidate(subset, fit, make_model, samples, split, seen, iterations, block, base=None) -> Candidate:
+def _candidate(subset, fit, make_model, samples, split, judged, iterations, block, base=None) -> Candidate:
+    """``judged``: (the judged samples, those pinning an estimated contact), as ``Split`` gives them."""
     try:
         fit = fit or fit_with_starts(make_model, subset, samples, split.train, iterations, base)
     except FitError as error:
         return Candidate(subset, None, math.inf, math.inf, str(error))
+    seen, pins = judged
     with torch.no_grad():
-        residual = fit.model(samples)[seen] - samples.force[seen]
-        scaled = (residual / samples.noise_floor[seen]).cpu().numpy()
+        force = fit.model(samples)
+    residual = force[seen] - samples.force[seen]
+    scaled, pinning = (((force - samples.force)[i] / samples.noise_floor[i]).cpu().numpy() for i in (seen, pins))
     whiteness = pooled_whiteness(samples, residual, seen, block)
-    return Candidate(subset, fit, rmse(fit.model, samples, split.val), whiteness, residual=scaled)
+    return Candidate(subset, fit, rmse(fit.model, samples, split.val), whiteness, residual=scaled, pinning=pinning)
+
+
+@dataclass(frozen=True)
+class HeldOutEvidence:
+    """What one model gains over another on the validation samples: in contact, and where contacts are estimated,
+    on the samples pinning them too, each part a ``TermEvidence`` at its share of the false-alarm rate."""
+
+    parts: tuple[TermEvidence, ...]
+
+    @property
+    def beyond(self) -> bool:
+        return any(part.beyond for part in self.parts)
+
+    def words(self) -> str:
+        contact, *pinning = (part.words() for part in self.parts)
+        return contact + "".join(f"; on the samples pinning the contacts, {words}" for words in pinning)
 
 
 @dataclass(frozen=True)
@@ -177,24 +197,41 @@ class HeldOutTest:
     residual's projection on the direction the better model adds (2 r·s − s² ≤ (r·ŝ)²); that direction was
     fitted on the train samples, so noise along it is ``test``'s (correlation, the reference's noise shared)
     and a model error of ``MODEL_ERROR`` σ adds at most its Cauchy–Schwarz bound: a false-alarm rate of at
-    most ``false_alarm`` a decision, as the shape evidence has on the train samples."""
+    most ``false_alarm`` a decision, as the shape evidence has on the train samples.
+
+    Where contacts are estimated, the validation samples that pin them (``pinning``: the null of the noise model
+    on those samples, no elastic law there; ``pinning_validation``, a mask over them) are a second test: a force
+    shaped like √w from contact (a solid viscosity) is a contact shift to first order, so in contact the contact
+    nuisances absorb it and only the samples before contact, which stay at the baseline, show where the contact
+    is. Each test at half the false-alarm rate, a term kept where either is beyond: at most ``false_alarm`` a
+    decision (Bonferroni). A real force before contact that no model has (long-range, a curved baseline) counts
+    in the larger model's mean square residual there (``term_evidence``'s s²), which scales the gain down."""
 
     test: StructureTest
     validation: np.ndarray  # bool over the judged samples
     false_alarm: float
+    pinning: StructureTest | None = None  # the noise model's null on the samples pinning estimated contacts
+    pinning_validation: np.ndarray | None = None  # bool over those samples
 
-    def evidence(self, smaller: Candidate, larger: Candidate, label: str) -> TermEvidence:
+    def evidence(self, smaller: Candidate, larger: Candidate, label: str) -> HeldOutEvidence:
         """What ``larger`` gains over ``smaller`` on the validation samples, ``label`` naming what it adds."""
-        gained = np.where(self.validation, smaller.residual - larger.residual, 0.0)
-        chi_square = (
-            float(np.sum(smaller.residual[self.validation] ** 2)),
-            float(np.sum(larger.residual[self.validation] ** 2)),
-        )
         # the parameters of the terms ``larger`` adds (a nuisance a fit may free or hold is no part of them)
         parameters = max(sum(len(larger.fit.params[t]) for t in larger.terms if t not in smaller.terms), 1)
-        # no validation sample in contact (a set of a few samples): no gain, so nothing is kept on the BIC alone
-        samples = max(int(self.validation.sum()), 1)
-        return term_evidence(self.test, gained, chi_square, samples, parameters, label, self.false_alarm)
+        parts = [(self.test, self.validation, smaller.residual, larger.residual)]
+        if self.pinning is not None and smaller.pinning is not None and larger.pinning is not None:
+            parts.append((self.pinning, self.pinning_validation, smaller.pinning, larger.pinning))
+        false_alarm = self.false_alarm / len(parts)
+        return HeldOutEvidence(tuple(_gain(*part, parameters, label, false_alarm) for part in parts))
+
+
+def _gain(test, validation, smaller, larger, parameters: int, label: str, false_alarm: float) -> TermEvidence:
+    """``term_evidence`` of the residual ``larger`` (noise units, on ``test``'s samples) against ``smaller`` on the
+    ``validation`` share of them."""
+    gained = np.where(validation, smaller - larger, 0.0)
+    chi_square = float(np.sum(smaller[validation] ** 2)), float(np.sum(larger[validation] ** 2))
+    # no validation sample there (a set of a few samples): no gain, so nothing is kept on the BIC alone
+    samples = max(int(validation.sum()), 1)
+    return term_evidence(test, gained, chi_square, samples, parameters, label, false_alarm)
 
 
 def choose(candidates: dict, bic_margin: float, held_out: HeldOutTest) -> tuple[tuple[str, ...], list[str]]:
