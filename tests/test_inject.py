@@ -2,6 +2,7 @@
 found with its size; and on data ptwin did not write (a shared development set with real PAAm noise)."""
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +79,36 @@ def test_a_viscosity_added_to_real_noise_is_named(tmp_path, coarse_cache):
     settings = inject_settings(SHARED_NULL, coarse_cache, "inject.sizes=[2.0]")
     trials = detection(settings, tmp_path / "run", progress=lambda _: None)
     assert trials[-1].confidence  # 63× the noise at its peak
+
+
+OPEN_DATA = Path(os.environ.get("PTWIN_OPEN_DATA", "-"))  # open_data/ of github.com/Jhko725/NeuralConstitutiveEq.jl
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    not (OPEN_DATA / "PAAM hydrogel").is_dir(),
+    reason="set PTWIN_OPEN_DATA to the open_data folder of Jhko725/NeuralConstitutiveEq.jl (public JPK curves)",
+)
+def test_a_viscosity_added_to_a_real_paam_spot_is_named_with_its_size(tmp_path):
+    # Real recordings that ptwin did not write (Abuhattum et al. 2022, PAAm): one spot at 5 and 15 µm/s, 5 Pa·s
+    # added at first order through the cantilever balance, everything else real. Named with its size over the
+    # recordings' own (5.74 over 0.59 when written), with the default basis and the whole chain.
+    from ptwin.data.import_afm import main as import_afm
+
+    folder = OPEN_DATA / "PAAM hydrogel"
+    files = [folder / "speed 5" / "PAA_speed 5_4nN_3.tab", folder / "speed 15" / "PAA_speed 15_4nN.tab"]
+    recordings = tmp_path / "paam"
+    import_afm(
+        [*map(str, files), "--out", str(recordings), "--probe-radius", "5e-6", "--viscosity", "1e-3"]
+        + ["--thickness", "8e-5"]
+    )
+    register()
+    with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
+        cfg = compose("inject", [f"data.path={recordings}", f"cache_dir={tmp_path / 'cache'}", "inject.sizes=[1.0]"])
+    as_recorded, added = detection(typed(cfg), tmp_path / "run", progress=lambda _: None)
+    assert not as_recorded.confidence
+    own = max(as_recorded.alone, 0.0)  # what γ fitted alone gives the recordings as they are
+    assert added.confidence and added.found - own == pytest.approx(5.0, rel=0.4)
 
 
 def test_values_that_do_not_match_the_terms_parameters_are_refused_in_one_line():
