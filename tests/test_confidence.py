@@ -27,3 +27,29 @@ def test_grade(removal, rivals, implausible, held_out, expected, reason):
         assert verdict.reasons == []
     else:
         assert any(reason in r for r in verdict.reasons), verdict.reasons
+
+
+def test_a_term_whose_interval_reaches_where_it_does_nothing_is_weak():
+    # Real PAAm A as recorded: gamma 1.6 named on its shape and on the samples before contact, but its profile
+    # interval (every nuisance refitted with it) is [0, 2.28]: the data do not exclude that it is absent.
+    verdict = grade(500.0, [], None, GOOD, bic_margin=10.0, heldout_margin=0.1, absent_within=["gamma = 0"])
+    assert verdict.confidence == "weak"
+    assert any("reaches gamma = 0, where it does nothing" in r for r in verdict.reasons)
+
+
+@pytest.mark.parametrize(
+    ("term", "name", "interval", "allowed"),
+    [
+        ("solid_viscosity", "gamma", [0.0, 2.28], True),  # the low side at the physical bound, where γ = 0
+        ("solid_viscosity", "gamma", [None, 2.28], True),
+        ("solid_viscosity", "gamma", [0.4, 2.28], False),
+        ("pore_pressure_relaxation", "M", [2.1e4, None], True),  # open towards M → ∞, where the lag vanishes
+        ("pore_pressure_relaxation", "M", [2.1e4, 4.0e4], False),
+        ("solid_relaxation", "tau", [None, None], False),  # no one tau removes the relaxation: g says it
+        ("contact_offset", "delta", [-3e-9, 2e-9], True),
+    ],
+)
+def test_where_an_interval_allows_a_terms_absence(term, name, interval, allowed):
+    from ptwin.physics.terms import VOCABULARY
+
+    assert VOCABULARY[term].PARAMS[name].allows_absence(interval) is allowed

@@ -15,7 +15,9 @@ The grade (README, "Confidence"):
 - moderate: at most one shortfall, and a mild one — a smaller BIC cost (still ≥ the
   margin), too few curves to hold one out, or parameters that vary across folds;
 - weak: anything else, in particular a confounded, implausible or held-out-contradicted
-  term. The reasons are given in words either way.
+  term, or one whose 95% profile interval under the noise model reaches the value where it
+  does nothing (γ = 0, M → ∞): the tests that named it weigh its own shape, the interval every
+  nuisance refitted with it. The reasons are given in words either way.
 """
 
 from __future__ import annotations
@@ -110,8 +112,10 @@ def grade(
     held_out: HeldOut | None,
     bic_margin: float,
     heldout_margin: float,
+    absent_within: list[str] = (),
 ) -> Grade:
-    """The confidence of one named term from its evidence (rules in the module docstring)."""
+    """The confidence of one named term from its evidence (rules in the module docstring); ``absent_within``:
+    the values where the term does nothing that its 95% intervals reach, in words (e.g. 'gamma = 0')."""
     mild, serious = [], []
     if removal_cost < 3 * bic_margin:
         mild.append(f"removing it costs only {removal_cost:.0f} BIC under the noise model")
@@ -119,6 +123,10 @@ def grade(
         serious.append("the data explain as well with " + " or ".join(confounded_with))
     if implausible:
         serious.append(implausible)
+    if absent_within:
+        serious.append(
+            f"its 95% interval under the noise model reaches {' and '.join(absent_within)}, where it does nothing"
+        )
     if held_out is None:
         mild.append("too few curves to test it on a curve it was not fitted to")
     else:

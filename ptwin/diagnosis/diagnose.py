@@ -470,9 +470,15 @@ def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: Diag
     removal = without.fit.bic - corrected.bic
     rivals = [" + ".join(t) or "the base model" for t in alternatives]
     implausible = corrected.implausible.get(term)
-    verdict = grade(removal, rivals, implausible, held_out, s.bic_margin, s.heldout_margin)
-    gain = _test_rmse(without, c.samples, c.split) / c.fit["corrected"]["test_rmse"]
     intervals = _parameter_intervals(corrected, term, c)
+    parameters = VOCABULARY[term].PARAMS
+    absent = [
+        _absence(name, parameters[name].absent)
+        for name in intervals
+        if parameters[name].allows_absence(intervals[name])
+    ]
+    verdict = grade(removal, rivals, implausible, held_out, s.bic_margin, s.heldout_margin, absent)
+    gain = _test_rmse(without, c.samples, c.split) / c.fit["corrected"]["test_rmse"]
     return {
         "term": term,
         "params": corrected.params[term],
@@ -541,6 +547,11 @@ def _parameter_intervals(fit: PhysicsFit, term: str, c: _Context) -> dict[str, l
             high = min(high, parameter.maximum)
         intervals[name] = [low, high]
     return intervals
+
+
+def _absence(name: str, value: float) -> str:
+    """Where a parameter removes its term, in words: 'gamma = 0', 'M → ∞'."""
+    return f"{name} → ∞" if math.isinf(value) else f"{name} = {value:g}"
 
 
 def _exp_or_none(log_value: float | None) -> float | None:

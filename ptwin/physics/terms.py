@@ -34,6 +34,8 @@ class Parameter:
     at or above it; ``maximum``: physical only below it; ``plausible``: the range where
     samples of the field have it. A log-parametrised value far outside that range (×/÷
     ``LIMIT``) is a limit where the term has no effect left: it reduces to the base model.
+    ``absent``: the value at which the term does nothing (math.inf: as it grows without bound; None: no
+    one value of this parameter removes the term).
     """
 
     unit: str
@@ -42,6 +44,7 @@ class Parameter:
     minimum: float | None = None
     maximum: float | None = None
     plausible: tuple[float, float] = (-math.inf, math.inf)
+    absent: float | None = None
 
     LIMIT: ClassVar[float] = 1e3
 
@@ -54,6 +57,16 @@ class Parameter:
         if value < self.plausible[0] / self.LIMIT:
             return f"{name} → 0"
         return None
+
+    def allows_absence(self, interval: list[float | None]) -> bool:
+        """Whether a 95% interval [low, high] (None: open on that side) reaches the value where the term does
+        nothing: the data do not exclude that the term is absent."""
+        low, high = interval
+        if self.absent is None:
+            return False
+        if math.isinf(self.absent):
+            return high is None
+        return (low is None or low <= self.absent) and (high is None or high >= self.absent)
 
     def label(self, name: str) -> str:
         """Axis label of a plot of this parameter, with its physical range."""
@@ -176,7 +189,7 @@ class SolidViscosity(Term):
     """Kelvin–Voigt viscous network: + π γ R U (gamma [Pa s])."""
 
     name = "solid_viscosity"
-    PARAMS = {"gamma": Parameter("Pa s", 0.0, minimum=0.0, plausible=(0.0, 1e4))}
+    PARAMS = {"gamma": Parameter("Pa s", 0.0, minimum=0.0, plausible=(0.0, 1e4), absent=0.0)}
     # Half-decades across the field's range: the contact corrections absorb this force at first order (the
     # caveat below), so χ² has a mirror basin at negative γ, and LM from γ 0 can fall either way (real PAAm
     # with 5 Pa·s added: to γ −6.4 from every start at 0; from these, the cost at the starts picks γ 3 and the
@@ -199,7 +212,7 @@ class SolidRelaxation(Term):
 
     name = "solid_relaxation"
     PARAMS = {
-        "g": Parameter("–", 0.1, minimum=0.0, plausible=(0.0, 5.0)),
+        "g": Parameter("–", 0.1, minimum=0.0, plausible=(0.0, 5.0), absent=0.0),
         "tau": Parameter("s", 1.0, log=True, plausible=(1e-4, 1e4)),
     }
     STARTS = [{"tau": tau} for tau in (1e-2, 1e-1, 1.0, 10.0)]
@@ -220,7 +233,7 @@ class PowerLawRheology(Term):
     integral of the elastic law over any base history (alpha [–], 0 ≤ alpha < 0.5)."""
 
     name = "power_law_rheology"
-    PARAMS = {"alpha": Parameter("–", 0.05, minimum=0.0, maximum=0.5, plausible=(0.0, 0.5))}
+    PARAMS = {"alpha": Parameter("–", 0.05, minimum=0.0, maximum=0.5, plausible=(0.0, 0.5), absent=0.0)}
     STARTS = [{"alpha": alpha} for alpha in (0.02, 0.1, 0.3)]
     TYPICAL = {"alpha": 0.05}
     TELL_APART = (
@@ -244,7 +257,7 @@ class PorePressureRelaxation(Term):
     """Finite drainage: F_D → F_p, tau_p dF_p/dt + F_p = F_D, tau_p = μR²/(K M) (M [Pa])."""
 
     name = "pore_pressure_relaxation"
-    PARAMS = {"M": Parameter("Pa", 1.0e5, log=True, plausible=(1e2, 1e8))}
+    PARAMS = {"M": Parameter("Pa", 1.0e5, log=True, plausible=(1e2, 1e8), absent=math.inf)}
     STARTS = [{"M": m} for m in (1e3, 1e4, 1e5, 1e6)]
     TYPICAL = {"M": 3.0e4}
     TELL_APART = "a deeper indent (tau_p grows as R²) or a hold at constant depth"
@@ -271,7 +284,7 @@ class StrainDependentPermeability(Term):
     """K → K·exp(−m w/ρ) (m [–])."""
 
     name = "strain_dependent_permeability"
-    PARAMS = {"m": Parameter("–", 0.0, minimum=0.0, plausible=(0.0, 50.0))}
+    PARAMS = {"m": Parameter("–", 0.0, minimum=0.0, plausible=(0.0, 50.0), absent=0.0)}
     TYPICAL = {"m": 1.0}
     TELL_APART = "a deeper indent (the effect grows with w/rho, not with speed)"
 
@@ -283,7 +296,7 @@ class CantileverDrag(Term):
     """Hydrodynamic drag on the cantilever: + b · base_speed (b [N s/m])."""
 
     name = "cantilever_drag"
-    PARAMS = {"b": Parameter("N s/m", 0.0, minimum=0.0, plausible=(0.0, 1e-2))}
+    PARAMS = {"b": Parameter("N s/m", 0.0, minimum=0.0, plausible=(0.0, 1e-2), absent=0.0)}
     TYPICAL = {"b": 1.0e-4}
     TELL_APART = "the approach before contact at each speed (drag offsets the baseline)"
     WITH_ESTIMATED_CONTACT = (
@@ -300,7 +313,7 @@ class ContactOffset(Term):
     """The recorded contact point is off by delta: the fluid sees depth w − delta (delta [m])."""
 
     name = "contact_offset"
-    PARAMS = {"delta": Parameter("m", 0.0)}
+    PARAMS = {"delta": Parameter("m", 0.0, absent=0.0)}
     TYPICAL = {"delta": 0.1e-6}
     TELL_APART = "more pre-contact baseline and a slower first contact"
     WITH_ESTIMATED_CONTACT = "each curve's contact point is fitted as a nuisance"
