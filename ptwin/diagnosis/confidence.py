@@ -23,7 +23,7 @@ The grade (README, "Confidence"):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import torch
@@ -112,7 +112,7 @@ def grade(
     held_out: HeldOut | None,
     bic_margin: float,
     heldout_margin: float,
-    absent_within: list[str] = (),
+    absent_within: Sequence[str] = (),
 ) -> Grade:
     """The confidence of one named term from its evidence (rules in the module docstring); ``absent_within``:
     the values where the term does nothing that its 95% intervals reach, in words (e.g. 'gamma = 0')."""
