@@ -85,8 +85,8 @@ def test_velocity_and_permeability_modes_are_exact_power_laws(small_basis):
 
 # Known defect (since d018596 built every basis on one thread): the precise preset's late modes are no converged
 # rank-one optima (their fixed points stop at 25 iterations), its discrete error grows from 2.1e-5 with a budget
-# of 120 modes to 7e-5 with its 230, and where it ends depends on rounding: 3.1e-4 from the closed form with one BLAS thread, 4.6e-5
-# with two. Strict: it fails as soon as the enrichment is fixed, so that this mark goes with it.
+# of 120 modes to 7e-5 with its 230, and where it ends depends on rounding: 3.1e-4 from the closed form with one
+# BLAS thread, 4.6e-5 with two. Strict: it fails as soon as the enrichment is fixed, so that this mark goes with it.
 PRECISE_STAGNATES = pytest.mark.xfail(
     strict=True, reason="the precise preset's enrichment stagnates past ~120 modes: 3.1e-4 against 1e-4 on one thread"
 )
