@@ -160,7 +160,6 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
 
     whiteness = {0: 50.0, 1: 50.0, 2: pair_whiteness, 3: 1.0}  # by subset size
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
-    monkeypatch.setattr(name, "rmse", lambda *args: 1.0)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
     samples = type(
         "Samples",
@@ -202,7 +201,6 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
 
     whiteness = {0: base_whiteness, 1: 1.0, 2: 1.0}
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
-    monkeypatch.setattr(name, "rmse", lambda *args: 1.0)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
     samples = type(
         "Samples",
@@ -252,7 +250,6 @@ def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_te
         return fit
 
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
-    monkeypatch.setattr(name, "rmse", lambda *args: 1.0)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: 2.0)
     samples = type(
         "Samples",

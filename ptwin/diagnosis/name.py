@@ -29,7 +29,7 @@ import torch
 from ptwin.diagnosis.locate import pooled_whiteness
 from ptwin.diagnosis.null import StructureTest, TermEvidence, term_evidence
 from ptwin.fitting.lm import FitError
-from ptwin.fitting.physics_fit import PhysicsFit, fit_with_starts, rmse
+from ptwin.fitting.physics_fit import PhysicsFit, fit_with_starts
 from ptwin.fitting.split import Split
 from ptwin.physics.samples import Samples
 
@@ -166,11 +166,11 @@ def _candidate(subset, fit, make_model, samples, split, judged, iterations, bloc
         return Candidate(subset, None, math.inf, math.inf, str(error))
     seen, pins = judged
     with torch.no_grad():
-        force = fit.model(samples)
-    residual = force[seen] - samples.force[seen]
-    scaled, pinning = (((force - samples.force)[i] / samples.noise_floor[i]).cpu().numpy() for i in (seen, pins))
-    whiteness = pooled_whiteness(samples, residual, seen, block)
-    return Candidate(subset, fit, rmse(fit.model, samples, split.val), whiteness, residual=scaled, pinning=pinning)
+        difference = fit.model(samples) - samples.force  # one evaluation for every residual below
+    scaled, pinning = ((difference[i] / samples.noise_floor[i]).cpu().numpy() for i in (seen, pins))
+    whiteness = pooled_whiteness(samples, difference[seen], seen, block)
+    val_rmse = difference[split.val].square().mean().sqrt().item()  # ``physics_fit.rmse`` on split.val
+    return Candidate(subset, fit, val_rmse, whiteness, residual=scaled, pinning=pinning)
 
 
 @dataclass(frozen=True)
