@@ -1,11 +1,13 @@
 """train.py's chain on generated data with a known truth, its checkpoints, and its sweeps."""
 
 import json
+import struct
 import subprocess
 import sys
 
 import pytest
 import torch
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from ptwin.fitting import checkpoint
 from tests.conftest import CONFIGS, run, simulated_set
@@ -30,7 +32,11 @@ def test_clean_data_every_stage_finds_k_and_nothing_else(clean_run):
         "fig4_apparent_permeability_depth.png",
     ):
         assert (output / name).is_file(), name
-    assert list((output / "tensorboard").glob("events.*"))
+    events = EventAccumulator(str(output / "tensorboard"), size_guidance={"images": 0}).Reload()
+    (image,) = events.Images("fig4_apparent_permeability_depth")
+    png = (output / "fig4_apparent_permeability_depth.png").read_bytes()
+    assert image.encoded_image_string == png  # the saved figure as it is
+    assert (image.width, image.height) == struct.unpack(">II", png[16:24])  # the PNG header's IHDR
 
 
 def test_stage_two_recovers_a_concealed_viscosity(viscous_run):
