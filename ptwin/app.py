@@ -1,5 +1,5 @@
 """What the Hydra faces share (``train.py``, ``python -m ptwin.map``, ``python -m ptwin.inject``,
-``python -m ptwin.pgd``): the typed settings registered as the configs' schema, their conversion to
+``python -m ptwin.basis``): the typed settings registered as the configs' schema, their conversion to
 dataclasses, and one line on stderr for anything that ends a run: exit code 2 for what a user can fix (bad
 recordings, a set that cannot support a diagnosis, a damaged or foreign checkpoint, an
 impossible setting, a Dask scheduler that does not answer), 3 for anything else, its
@@ -7,6 +7,7 @@ traceback kept in the run directory."""
 
 from __future__ import annotations
 
+import gc
 import sys
 import traceback
 from collections.abc import Iterator
@@ -26,7 +27,7 @@ from ptwin.pipeline.settings import InjectRunSettings, MapRunSettings, Settings
 
 @dataclass
 class BuildSettings:
-    """``configs/pgd_build.yaml``: ``python -m ptwin.pgd``."""
+    """``configs/pgd_build.yaml``: ``python -m ptwin.basis``."""
 
     pgd: PGDConfig = field(default_factory=PGDConfig)
     out: str | None = None  # default: the cache, where train.py looks
@@ -45,6 +46,13 @@ def register() -> None:
     store.store(name="map_schema", node=MapRunSettings)
     store.store(name="inject_schema", node=InjectRunSettings)
     store.store(name="pgd_build_schema", node=BuildSettings)
+
+
+def freeze_imports() -> None:
+    """Leave what the imports made (torch's, matplotlib's, pandas' objects) out of every later garbage
+    collection (``gc.freeze``); a face calls it once its imports are done. The run's full collections and the
+    one at exit walked them all: 1.0 s of the demo's 7.3 s. What the run makes is collected as usual."""
+    gc.freeze()
 
 
 def typed(cfg: DictConfig):

@@ -13,12 +13,13 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from ptwin.app import one_line_errors, register, typed
+from ptwin.app import freeze_imports, one_line_errors, register, typed
 from ptwin.pgd.build import build_basis
 from ptwin.pgd.cache import cache_path
 from ptwin.physics.fluid_accuracy import verify
 
 register()
+freeze_imports()
 
 
 @hydra.main(version_base="1.3", config_path="../configs", config_name="pgd_build")

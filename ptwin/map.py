@@ -17,10 +17,11 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from ptwin.app import one_line_errors, register, typed
+from ptwin.app import freeze_imports, one_line_errors, register, typed
 from ptwin.pipeline.forcemap import run_map
 
 register()
+freeze_imports()
 
 
 @hydra.main(version_base="1.3", config_path="../configs", config_name="map")
