@@ -172,3 +172,27 @@ def test_a_start_the_model_cannot_evaluate_is_a_fit_error_in_words():
     solver = LevenbergMarquardt(residual, torch.tensor([-1.0], dtype=torch.float64))
     with pytest.raises(FitError, match="not finite"):
         solver.step()
+
+
+def test_a_system_too_singular_to_solve_is_retried_with_more_damping(monkeypatch):
+    # The first normal equations "fail" to solve: no step. The run goes on with a larger damping rather than
+    # reading the empty step as one that promised nothing.
+    t = torch.linspace(0, 4, 200, dtype=torch.float64)
+
+    def residual(theta):
+        return theta[0] * torch.exp(-theta[1] * t) - 2.0 * torch.exp(-0.3 * t)
+
+    solve, failures = torch.linalg.solve, []
+
+    def failing_once(*args, **kwargs):
+        if not failures:
+            failures.append(True)
+            raise RuntimeError("linalg.solve: The solver failed because the input matrix is singular.")
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(torch.linalg, "solve", failing_once)
+    solver = LevenbergMarquardt(residual, torch.tensor([1.0, 1.0], dtype=torch.float64))
+    steps = []
+    solver.run(100, tolerance=1e-12, callback=steps.append)
+    assert failures and not steps[0].accepted and steps[0].predicted is None
+    torch.testing.assert_close(solver.theta, torch.tensor([2.0, 0.3], dtype=torch.float64), rtol=1e-8, atol=1e-8)

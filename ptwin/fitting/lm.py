@@ -105,7 +105,7 @@ class Step:
     accepted: bool
     damping: float
     gradient: torch.Tensor  # Jᵀr before the step, per entry of θ
-    predicted: float  # the decrease of ½‖r‖² the linearised model promised for the step
+    predicted: float | None  # the decrease of ½‖r‖² the linearised model promised (None: no step solved)
 
 
 class LevenbergMarquardt:
@@ -175,10 +175,11 @@ class LevenbergMarquardt:
         gradient = jacobian.T @ r
         cost = 0.5 * (r @ r)
         scale = normal.diagonal().clamp(min=1e-12 * normal.diagonal().max().clamp(min=1e-300))
+        solved = True
         try:
             delta = -torch.linalg.solve(normal + s["damping"] * torch.diag(scale), gradient) * self.learning_rate
         except RuntimeError:  # singular even with damping: a larger damping next time
-            delta = torch.zeros_like(gradient)
+            delta, solved = torch.zeros_like(gradient), False
         predicted = -(gradient @ delta + 0.5 * delta @ normal @ delta)
         candidate = s["theta"] + delta
         new_cost, traced = self._trial(candidate)
@@ -196,7 +197,12 @@ class LevenbergMarquardt:
             s["cost"] = cost.detach()
         s["iteration"] = s["iteration"] + 1
         return Step(
-            int(s["iteration"]), s["cost"].item(), accepted, s["damping"].item(), gradient.detach(), float(predicted)
+            int(s["iteration"]),
+            s["cost"].item(),
+            accepted,
+            s["damping"].item(),
+            gradient.detach(),
+            float(predicted) if solved else None,
         )
 
     def run(
@@ -210,7 +216,8 @@ class LevenbergMarquardt:
         or by < ``settled`` (absolute: a gain that means nothing in the cost's own units), or when a rejected
         step promised no more than that: a larger damping only shortens the step and its promise, so the
         steps that would follow end where this one leaves θ, at a cost of one evaluation each (a power law
-        at the edge of its range tried eleven of them)."""
+        at the edge of its range tried eleven of them). Where the normal equations could not be solved there
+        was no step: a larger damping is tried."""
         while int(self.state["iteration"]) < iterations:
             before = self.state["cost"].item()
             step = self.step()
@@ -218,7 +225,11 @@ class LevenbergMarquardt:
                 callback(step)
             if step.accepted and before - step.cost <= max(tolerance * before, settled):
                 break
-            if not step.accepted and step.predicted <= max(tolerance * step.cost, settled):
+            if (
+                step.predicted is not None
+                and not step.accepted
+                and step.predicted <= max(tolerance * step.cost, settled)
+            ):
                 break
             if step.damping > 1e12:
                 break
