@@ -2,6 +2,7 @@
 direct quadrature of the integral, and gradcheck."""
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ import torch
 
 from ptwin.physics.power_law import T0, kernel_for, kernel_modes, ting_integral
 from ptwin.physics.recurrence import hereditary_inverse, relaxation_integral
+from ptwin.physics.terms import PowerLawRheology
 
 ALPHAS = [0.0, 0.01, 0.1, 0.3, 0.49]
 
@@ -118,3 +120,19 @@ def test_the_self_consistent_law_inverts_strong_memory_exactly(g, alpha):
         relaxed, c0 - 1, torch.cat([weights, torch.tensor([g], dtype=torch.float64)]), torch.cat([times, tau]), time
     )
     torch.testing.assert_close(recovered, elastic, rtol=1e-10, atol=1e-12)
+
+
+def test_the_term_reuses_its_decays_for_the_samples_it_saw_last_and_for_no_others():
+    """The kernel's decays depend on the samples' times alone: the term keeps them for the samples a fit
+    evaluates again and again, and computes them afresh for any other samples."""
+    term = PowerLawRheology(5e-6, alpha=0.2)
+
+    def samples(duration):
+        time = torch.cat([torch.linspace(0, duration, 300, dtype=torch.float64)] * 2)
+        return SimpleNamespace(time=time, start=torch.arange(600) % 300 == 0)
+
+    first, second = samples(1.0), samples(3.0)
+    for recorded in (first, first, second, first):
+        elastic = hertz(recorded.time * 1e-6)
+        expected = ting_integral(elastic, torch.tensor(0.2, dtype=torch.float64), recorded.time, recorded.start)
+        assert torch.equal(term.elastic_force(recorded, elastic), expected - elastic)

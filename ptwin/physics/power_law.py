@@ -24,7 +24,7 @@ import math
 
 import torch
 
-from ptwin.physics.recurrence import relaxation_integral
+from ptwin.physics.recurrence import decays, relaxation_integral
 
 T0 = 1.0  # [s]: E* is the modulus at t0
 PER_EFOLD = 1.5
@@ -53,15 +53,30 @@ def kernel_for(alpha: torch.Tensor, time: torch.Tensor):
     return kernel_modes(alpha, shortest, max(longest, shortest))
 
 
-def ting_integral(signal: torch.Tensor, alpha: torch.Tensor, time: torch.Tensor, start: torch.Tensor) -> torch.Tensor:
+def ting_integral(
+    signal: torch.Tensor,
+    alpha: torch.Tensor,
+    time: torch.Tensor,
+    start: torch.Tensor,
+    decayed: tuple[torch.Tensor, torch.Tensor] | None = None,
+) -> torch.Tensor:
     """F(0) + ∫₀ᵗ ((t − s)/t0)^(−α) dF/ds ds for F = ``signal`` (S,) on each curve (``start`` marks their
     first samples), exact for F linear between samples up to the kernel's accuracy. F(0), the value before
     contact, passes unrelaxed: an elastic law read off a noisy curve need not vanish at w = 0, and that
-    offset is no stress in the network (dropping it shifted every curve by it)."""
+    offset is no stress in the network (dropping it shifted every curve by it). ``decayed``: the kernel's
+    ``kernel_decays`` on these samples, where the caller keeps them."""
     c0, weights, times = kernel_for(alpha, time)
     origin = linear_origin(signal, start)
-    modes = relaxation_integral(signal, times[:, None], time, start)
+    modes = relaxation_integral(signal, times[:, None], time, start, decayed)
     return origin + c0 * (signal - origin) + weights @ modes
+
+
+def kernel_decays(time: torch.Tensor, start: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each mode's decay over each sample step (``ptwin.physics.recurrence.decays``). The modes' relaxation
+    times depend on the samples' time scales, not on α: a fit that evaluates the same samples again and
+    again needs them once (a quarter of the term's evaluation on the demo)."""
+    _, _, times = kernel_for(torch.zeros((), dtype=time.dtype, device=time.device), time)
+    return decays(time, start, times[:, None])
 
 
 def linear_origin(signal: torch.Tensor, start: torch.Tensor) -> torch.Tensor:

@@ -75,7 +75,7 @@ def _shifted(x: torch.Tensor, later: bool) -> torch.Tensor:
     return torch.cat([zero, x[..., :-1]], dim=-1) if not later else torch.cat([x[..., 1:], zero], dim=-1)
 
 
-def _decay(time: torch.Tensor, start: torch.Tensor, relaxation_time: torch.Tensor):
+def decays(time: torch.Tensor, start: torch.Tensor, relaxation_time: torch.Tensor):
     """(a, τ(1 − a)/Δt) per sample for a = exp(−Δt/τ); a = 0 where τ = 0 or a curve starts; the mean
     τ(1 − a)/Δt → 1 over a step of zero length (repeated times)."""
     step = torch.diff(time, prepend=time[:1]).where(~start, torch.ones_like(time))
@@ -100,19 +100,24 @@ def first_order_lag(
     Args:
         forcing: u (S,); relaxation_time: τ ≥ 0 (S,) [s]; time: (S,) [s]; start: bool (S,).
     """
-    a, weight = _decay(time, start, relaxation_time)
+    a, weight = decays(time, start, relaxation_time)
     previous = torch.cat([forcing[:1], forcing[:-1]])
     b = forcing - a * previous - (forcing - previous) * weight
     return linear_recurrence(a, b.where(~start, forcing))
 
 
 def relaxation_integral(
-    signal: torch.Tensor, relaxation_time: torch.Tensor, time: torch.Tensor, start: torch.Tensor
+    signal: torch.Tensor,
+    relaxation_time: torch.Tensor,
+    time: torch.Tensor,
+    start: torch.Tensor,
+    decayed: tuple[torch.Tensor, torch.Tensor] | None = None,
 ) -> torch.Tensor:
     """q(t) = ∫₀ᵗ exp(−(t−s)/τ) ds'(s) ds from each curve start, exact for s linear between samples.
 
-    ``relaxation_time`` τ: (S,), or (M, 1) for M modes at once (result (M, S))."""
-    a, weight = _decay(time, start, relaxation_time)
+    ``relaxation_time`` τ: (S,), or (M, 1) for M modes at once (result (M, S)); ``decayed``: its ``decays``,
+    where the caller keeps them (they depend on the times alone)."""
+    a, weight = decays(time, start, relaxation_time) if decayed is None else decayed
     increment = torch.diff(signal, prepend=signal[:1])
     return linear_recurrence(a, (increment * weight).where(~start, torch.zeros_like(signal)))
 

@@ -21,7 +21,7 @@ from typing import ClassVar
 import torch
 from torch import nn
 
-from ptwin.physics.power_law import kernel_for, ting_integral
+from ptwin.physics.power_law import kernel_decays, kernel_for, ting_integral
 from ptwin.physics.recurrence import first_order_lag, relaxation_integral
 from ptwin.physics.samples import Samples
 
@@ -243,7 +243,16 @@ class PowerLawRheology(Term):
     ACTS_ON_ELASTIC = True
 
     def elastic_force(self, samples, elastic):
-        return ting_integral(elastic, self.value("alpha"), samples.time, samples.start) - elastic
+        return ting_integral(elastic, self.value("alpha"), samples.time, samples.start, self._decays(samples)) - elastic
+
+    def _decays(self, samples):
+        """``kernel_decays`` of ``samples``, kept for the samples last seen (held, so their identity cannot be
+        another's): a fit evaluates the same samples at every step."""
+        kept = getattr(self, "_kept_decays", None)
+        if kept is None or kept[0] is not samples.time or kept[1] is not samples.start:
+            kept = (samples.time, samples.start, kernel_decays(samples.time, samples.start))
+            self._kept_decays = kept
+        return kept[2]
 
     def elastic_modes(self, samples):
         c0, weights, times = kernel_for(self.value("alpha"), samples.time)
