@@ -11,7 +11,7 @@ from hydra import compose, initialize_config_dir
 
 from ptwin.app import register, typed
 from ptwin.data.recordings import load_recordings
-from ptwin.pipeline.inject import Trial, added_force, detection, detection_limits
+from ptwin.pipeline.inject import Trial, added_force, detection, detection_limits, detection_section
 from ptwin.pipeline.prepare import prepare
 from tests.conftest import CONFIGS, simulated_set
 
@@ -71,6 +71,20 @@ def test_a_verdict_says_which_other_terms_the_diagnosis_named():
     assert named.verdict("gamma", 0.0).endswith("9.79 over the recordings' own; beside it solid_relaxation (weak)")
     alone = Trial(2.0, 10.0, 73.2, "weak", 9.79, [8.61, 11.1], False, True)
     assert "beside" not in alone.verdict("gamma", 0.0) and "the diagnosis named" not in alone.verdict("gamma", 0.0)
+
+
+def test_the_section_says_which_rule_left_an_added_term_unnamed():
+    # Real PAAm with 5 Pa s added: the held-out test pruned it; the user reads that, not a bare "not named".
+    pruned = "solid_viscosity pruned: on the validation samples solid_viscosity takes 8 units of χ² off the residual"
+    trials = [
+        Trial(0.0, None, 0.0, "", None, [None, None], False, True, 1.6, why=("solid_viscosity: as recorded",)),
+        Trial(1.0, 5.0, 26.0, "", None, [None, None], False, True, 7.03, why=(pruned,)),
+        Trial(2.0, 10.0, 52.0, "moderate", 11.2, [9.8, 12.5], False, True),
+    ]
+    section = detection_section("solid_viscosity", "gamma", trials, 0.0, ["solid_viscosity"])
+    assert f"- gamma 5 added: {pruned}" in section
+    assert not any("as recorded" in line and line.startswith("- ") for line in section)  # the sizes added only
+    assert sum(line.startswith("- ") for line in section) == 1  # none for the size named
 
 
 @pytest.mark.slow

@@ -49,6 +49,7 @@ class Trial:
     candidate: bool  # whether the diagnosis fitted the term at all (see ``no_candidate``)
     alone: float | None = None  # the strength fitted with the term alone beside the base model, named or not
     others: tuple[str, ...] = ()  # the other terms the diagnosis named, each with its confidence
+    why: tuple[str, ...] = ()  # where it was not named: the diagnosis's notes on the term (which rule left it out)
 
     def verdict(self, strength: str, native: float) -> str:
         """What the diagnosis said of the term, in words, and of any other term it named (a term added and
@@ -252,7 +253,8 @@ def _trial(size: float, added: float | None, peak: float, outcome: RunResult, te
     entry = next((e for e in diagnosis["left_out"] if e["term"] == term), None)
     if entry is None:
         alone = (outcome.candidates.get(term) or {}).get(strength)
-        return Trial(size, added, peak, "", None, [None, None], diagnosis["unexplained"], candidate, alone, others)
+        why = tuple(note for note in diagnosis["notes"] if term in note)
+        return Trial(size, added, peak, "", None, [None, None], diagnosis["unexplained"], candidate, alone, others, why)
     value, interval = entry["params"][strength], entry["param_interval"][strength]
     unexplained = diagnosis["unexplained"]
     return Trial(size, added, peak, entry["confidence"], value, interval, unexplained, candidate, others=others)
@@ -286,7 +288,9 @@ def native_strength(prepared: Prepared, term: str, strength: str, iterations: in
 
 def detection_section(term: str, strength: str, trials: list[Trial], native: float, listed: list[str]) -> list[str]:
     """report.md's section: each size added, the verdict (the size found over the recordings' own
-    ``native`` strength), and the smallest size named (``listed``: ``diagnosis.terms``, for why none could be)."""
+    ``native`` strength), what the diagnosis said of the term where it was added and not named (the rule that
+    left it out, in its own words), and the smallest size named (``listed``: ``diagnosis.terms``, for why none
+    could be)."""
     lines = [
         "## What these recordings could have shown",
         "",
@@ -299,6 +303,10 @@ def detection_section(term: str, strength: str, trials: list[Trial], native: flo
     for trial in trials:
         added = "as recorded" if trial.added is None else f"{trial.added:.3g}"
         lines.append(f"| {added} | {trial.peak:.1f} | {trial.verdict(strength, native)} |")
+    unnamed = [t for t in trials[1:] if t.why]
+    if unnamed:
+        lines += ["", f"Where `{term}` was added and not named, what the diagnosis said of it:"]
+        lines += [f"- {strength} {t.added:.3g} added: {note}" for t in unnamed for note in t.why]
     named = [t for t in trials[1:] if t.confidence]
     if named:
         smallest = f"The smallest {strength} named: {named[0].added:.3g} (peak {named[0].peak:.1f}× the noise std)."
