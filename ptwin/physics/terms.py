@@ -241,17 +241,17 @@ class PowerLawRheology(Term):
         "milliseconds) or a third speed further apart (it grows as speed^alpha, Darcy's as speed)"
     )
     ACTS_ON_ELASTIC = True
+    # (time, start, their kernel_decays) of the samples last seen, the tensors held so that their identity
+    # cannot be another's: a fit evaluates the same samples at every step.
+    _kept_decays: tuple[torch.Tensor, torch.Tensor, tuple[torch.Tensor, torch.Tensor]] | None = None
 
     def elastic_force(self, samples, elastic):
         return ting_integral(elastic, self.value("alpha"), samples.time, samples.start, self._decays(samples)) - elastic
 
     def _decays(self, samples):
-        """``kernel_decays`` of ``samples``, kept for the samples last seen (held, so their identity cannot be
-        another's): a fit evaluates the same samples at every step."""
-        kept = getattr(self, "_kept_decays", None)
+        kept = self._kept_decays
         if kept is None or kept[0] is not samples.time or kept[1] is not samples.start:
-            kept = (samples.time, samples.start, kernel_decays(samples.time, samples.start))
-            self._kept_decays = kept
+            kept = self._kept_decays = (samples.time, samples.start, kernel_decays(samples.time, samples.start))
         return kept[2]
 
     def elastic_modes(self, samples):
