@@ -175,7 +175,7 @@ def parameters_within(case: Case, d: dict) -> bool:
 def row(case: Case, experiment: Experiment, d: dict, seconds: float) -> tuple:
     named = " + ".join(f"{e['term']} ({e['confidence']})" for e in d["left_out"])
     if d["unexplained"]:
-        named = "unexplained"
+        named = f"unexplained [{named}]" if named else "unexplained"
     truth = experiment.permeability
     low, high = d["permeability"]["corrected_interval"]
     covers = "–" if low is None or high is None else ("yes" if low <= truth <= high else "no")

@@ -312,10 +312,11 @@ def test_a_term_named_below_strong_carries_the_experiment_that_would_make_it_str
     assert predictions == ["prediction"]
 
 
-@pytest.mark.parametrize(("twin_rmse", "named"), [(0.6e-9, ("a",)), (0.49e-9, ("a",)), (0.3e-9, ())])
-def test_structure_left_is_unexplained_only_where_the_hybrid_twin_predicts_better(twin_rmse, named):
+@pytest.mark.parametrize(("twin_rmse", "unexplained"), [(0.6e-9, False), (0.49e-9, False), (0.3e-9, True)])
+def test_structure_left_is_unexplained_only_where_the_hybrid_twin_predicts_better(twin_rmse, unexplained):
     # On a 1 nN noise the chosen term's 0.5 nN: a twin at 0.49 nN does better by what a model error of 0.1 nN
-    # would (0.5² − 0.49² < 0.15²), no more; at 0.3 nN it captures what the term leaves.
+    # would (0.5² − 0.49² < 0.15²), no more; at 0.3 nN it captures what the term leaves. The term passed the BIC
+    # margin and the held-out test either way, so it is named, beside "unexplained" where structure is left.
     from ptwin.diagnosis.diagnose import DiagnosisSettings, _select
 
     candidates = {
@@ -323,10 +324,11 @@ def test_structure_left_is_unexplained_only_where_the_hybrid_twin_predicts_bette
         ("a",): candidate(("a",), 1000.0, 0.5e-9, whiteness=8.0),  # above the test's 5: structure left
     }
     pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, twin_rmse, 1.0e-9, {}, HELD_OUT_PASSES)
-    assert pick.structured and pick.chosen == named and pick.unexplained == (not named)
-    assert _select(
-        candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_PASSES
-    ).unexplained  # no witness
+    assert pick.structured and pick.chosen == ("a",) and pick.unexplained == unexplained
+    alone = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_PASSES)
+    assert alone.chosen == ("a",) and alone.unexplained  # no witness
+    pruned = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_FAILS)
+    assert pruned.chosen == () and pruned.unexplained  # a term the held-out test prunes is not named beside it
 
 
 def test_a_residual_within_the_noise_as_a_whole_names_a_term_it_is_not_noise_in_the_shape_of():
@@ -401,6 +403,71 @@ def test_no_structure_is_said_as_what_the_test_found_not_as_a_model_that_fits(ra
     sentence = summarise(d, None, ABOVE_FIVE)
     assert "explains every curve" not in sentence and f"validation RMS {ratio:.2f}× the noise std" in sentence
     assert ("cannot tell from what their noise could leave" in sentence) == warned
+
+
+def test_a_term_named_beside_unexplained_structure_gets_no_interval_and_says_why(monkeypatch):
+    # Real agarose A with 5 Pa·s added: a profile of a model that misses the data bounds nothing, and its open sides
+    # are no sign that γ = 0 would do (the first version said so).
+    from types import SimpleNamespace
+
+    import ptwin.diagnosis.diagnose as diagnose
+
+    def no_profile(*args):
+        raise AssertionError("a profile interval of a model that misses the data")
+
+    monkeypatch.setattr(diagnose, "_parameter_intervals", no_profile)
+    monkeypatch.setattr(diagnose, "held_out_curves", lambda *args: None)
+    monkeypatch.setattr(diagnose, "_test_rmse", lambda *args: 2.0)
+    base, named = candidate((), 2000.0, 2e-11), candidate(("solid_viscosity",), 1000.0, 1.6e-11)
+    named.fit.params = {"solid_viscosity": {"gamma": 6.15}}
+    named.fit.param_std = {"solid_viscosity": {"gamma": 0.3}}
+    named.fit.correlation_with_permeability = {"solid_viscosity": {"gamma": 0.1}}
+    left = "whiteness 30.8 against 5.7"
+    context = SimpleNamespace(
+        candidates={(): base},
+        corrected=named,
+        fit={"corrected": {"test_rmse": 1.0}},
+        noise=SimpleNamespace(std=1e-11),
+        witness=None,
+        unexplained=left,
+        samples=None,
+        seen=None,
+        split=None,
+    )
+    settings = diagnose.DiagnosisSettings()
+    entry = diagnose._left_out_entry("solid_viscosity", ("solid_viscosity",), context, [], None, settings)
+    assert entry["params"] == {"gamma": 6.15} and entry["param_interval"] == {"gamma": [None, None]}
+    assert entry["param_std"] == {"gamma": None} and entry["confidence"] == "weak"
+    assert f"no term of the vocabulary explains ({left})" in entry["evidence"] and "gamma = 0" not in entry["evidence"]
+
+
+@pytest.mark.parametrize("named", [[], [{"term": "solid_viscosity", "confidence": "weak"}]])
+def test_structure_no_term_explains_is_said_beside_what_a_term_takes_of_it(named):
+    from types import SimpleNamespace
+
+    from ptwin.diagnosis.words import summarise
+    from ptwin.reporting.report import _others
+
+    d = SimpleNamespace(
+        detected=True,
+        unexplained=True,
+        left_out=named,
+        where=[],
+        fit={"base": {"val_rmse": 3e-10}, "corrected": {"val_rmse": 2e-10}, "hybrid": {"val_rmse": None}},
+        noise_floor=1e-10,
+        whiteness={"base": 50.0, "corrected": 30.0},
+        confounded=[],
+        permeability={"corrected": 2e-16, "corrected_interval": [None, None]},
+    )
+    sentence = summarise(d, None, ABOVE_FIVE)
+    payload = {"rejected": [], "confounded": [], "unexplained": True, "left_out": named, "fit": d.fit}
+    line = _others(payload)[0]
+    assert "no interval is given" in sentence and "hybrid network" not in sentence + line
+    if named:
+        assert "solid_viscosity takes part of it (weak: the validation RMS falls to 2.00× the noise std)" in sentence
+        assert "structure remains beyond what `solid_viscosity` takes (named, weak)" in line
+    else:
+        assert "No term of the vocabulary explains the residual" in sentence and "no term is claimed" in line
 
 
 def test_a_rival_whose_k_stayed_at_the_top_of_the_field_gives_that_limit_not_a_value():

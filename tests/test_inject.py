@@ -73,6 +73,15 @@ def test_a_verdict_says_which_other_terms_the_diagnosis_named():
     assert "beside" not in alone.verdict("gamma", 0.0) and "the diagnosis named" not in alone.verdict("gamma", 0.0)
 
 
+def test_a_size_named_beside_unexplained_structure_is_given_without_an_interval():
+    # Real agarose A with 5 Pa s added: the viscosity named beside structure no term explains. "gamma not fixed by
+    # these data" hid the size it took; the words say where the missing interval comes from instead.
+    named = Trial(1.0, 5.0, 42.8, "weak", 6.15, [None, None], True, True)
+    assert named.verdict("gamma", 0.615) == (
+        "named (weak), gamma 6.15 (from a model that misses the data: no interval holds); 5.54 over the recordings' own"
+    )
+
+
 def test_the_section_says_which_rule_left_an_added_term_unnamed():
     # Real PAAm with 5 Pa s added: the held-out test pruned it; the user reads that, not a bare "not named".
     pruned = "solid_viscosity pruned: on the validation samples solid_viscosity takes 8 units of χ² off the residual"

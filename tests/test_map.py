@@ -117,6 +117,22 @@ def test_dask_with_two_workers_gives_the_serial_table(serial_map, generated_map,
     pd.testing.assert_frame_equal(dask[columns], serial[columns])
 
 
+@pytest.mark.parametrize(
+    ("left_out", "confidence", "unexplained", "said"),
+    [
+        ("", "", False, "nothing named"),
+        ("", "", True, "unexplained"),
+        ("solid_viscosity", "weak", True, "solid_viscosity (weak) + unexplained"),
+        ("a;b", "strong;weak", False, "a (strong) + b (weak)"),
+    ],
+)
+def test_a_spot_s_verdict_names_what_it_named_beside_what_is_unexplained(left_out, confidence, unexplained, said):
+    from ptwin.diagnosis.spatial import verdict
+
+    row = {"status": "ok", "left_out": left_out, "confidence": confidence, "unexplained": unexplained}
+    assert verdict(row) == said
+
+
 def test_regions_are_edge_connected_groups_largest_first():
     #   y=2  . x x
     #   y=1  x . x

@@ -15,9 +15,10 @@ The grade (README, "Confidence"):
 - moderate: at most one shortfall, and a mild one — a smaller BIC cost (still ≥ the
   margin), too few curves to hold one out, or parameters that vary across folds;
 - weak: anything else, in particular a confounded, implausible or held-out-contradicted
-  term, or one whose 95% profile interval under the noise model reaches the value where it
+  term, one whose 95% profile interval under the noise model reaches the value where it
   does nothing (γ = 0, M → ∞): the tests that named it weigh its own shape, the interval every
-  nuisance refitted with it. The reasons are given in words either way.
+  nuisance refitted with it; or one named beside structure that no term explains (its size
+  is what it takes in a model that misses the data). The reasons are given in words either way.
 """
 
 from __future__ import annotations
@@ -113,10 +114,17 @@ def grade(
     bic_margin: float,
     heldout_margin: float,
     absent_within: Sequence[str] = (),
+    unexplained: str | None = None,
 ) -> Grade:
     """The confidence of one named term from its evidence (rules in the module docstring); ``absent_within``:
-    the values where the term does nothing that its 95% intervals reach, in words (e.g. 'gamma = 0')."""
+    the values where the term does nothing that its 95% intervals reach, in words (e.g. 'gamma = 0');
+    ``unexplained``: the structure the named model leaves, in words (None: none)."""
     mild, serious = [], []
+    if unexplained is not None:
+        serious.append(
+            f"structure remains that no term of the vocabulary explains ({unexplained}), so its size is what it "
+            "takes in a model that misses the data, with no interval"
+        )
     if removal_cost < 3 * bic_margin:
         mild.append(f"removing it costs only {removal_cost:.0f} BIC under the noise model")
     if confounded_with:

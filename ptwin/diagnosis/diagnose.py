@@ -184,9 +184,10 @@ def diagnose(
             learned = hybrid.network(samples)[seen]
             named = corrected.fit.model(samples)[seen] - base.fit.model(samples)[seen]
         witness = _explained_fraction(learned, named)
-    context = _Context(samples, split, seen, candidates, corrected, fit, noise, witness)
+    left = test.words(corrected.whiteness) if pick.unexplained else None
+    context = _Context(samples, split, seen, candidates, corrected, fit, noise, witness, left)
     left_out = [_left_out_entry(term, chosen, context, rivals, make_model, s) for term in chosen]
-    if design is not None:
+    if design is not None and not pick.unexplained:  # no recording makes a term strong beside unexplained structure
         predictions += _make_strong(left_out, chosen, candidates, design, progress)
     left_out.sort(key=lambda entry: -entry["test_rmse_gain"])
     diagnosis = Diagnosis(
@@ -253,7 +254,11 @@ def _select(
     none, or if it leaves structure that a flexible model captures: the hybrid twin (validation RMS
     ``flexible`` [N]) predicts the validation samples better by more than the structure test's tolerated
     model error (``beyond_model_error``; noise std ``noise_std`` [N]). Where the twin does no better, what is
-    left is no physics either model has (the chosen model's own error), and the subset is named.
+    left is no physics either model has (the chosen model's own error), and the subset is named. Where it
+    does better, or there is no twin, the subset is still named beside "unexplained": it passed the BIC
+    margin and the held-out test against the model without it, so what it takes is in the data, while what
+    it leaves is no term's (contract v2.3: structure "that no accepted term explains"); its grade is weak and
+    its sizes carry no interval (``_left_out_entry``), the model missing the data.
     No structure in the residual as a whole: a term is still named where the residual is not noise in its own
     shape (``evidence``, ``null.TermEvidence``: beyond what noise and a model error of ``MODEL_ERROR`` give
     it; a test of one shape is far more powerful than a test of all of them), if the selection keeps it.
@@ -277,10 +282,10 @@ def _select(
             return _Selection(True, chosen, notes=notes)
         if chosen:
             notes.append(
-                f"{' + '.join(chosen)} lowers the BIC most but leaves structure "
-                f"({test.words(corrected.whiteness)}): not claimed"
+                f"{' + '.join(chosen)} passes the BIC margin and the held-out test but leaves structure "
+                f"({test.words(corrected.whiteness)}): named, weak, beside what no term of the vocabulary explains"
             )
-        return _Selection(True, unexplained=True, notes=notes)
+        return _Selection(True, chosen, unexplained=True, notes=notes)
     proven = [label for label, e in evidence.items() if e.beyond]
     pruned = []  # why a subset beyond the noise in its own shape is not named: the held-out test pruned it
     if proven:
@@ -355,6 +360,7 @@ class _Context:
     fit: dict[str, dict[str, float]]
     noise: NoiseModel
     witness: float | None  # share of the hybrid network's learned error the named terms account for (None: no twin)
+    unexplained: str | None  # the structure the named terms leave, in words (None: they leave none)
 
 
 def _test_rmse(candidate: Candidate, samples: Samples, split: Split) -> float:
@@ -470,14 +476,18 @@ def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: Diag
     removal = without.fit.bic - corrected.bic
     rivals = [" + ".join(t) or "the base model" for t in alternatives]
     implausible = corrected.implausible.get(term)
-    intervals = _parameter_intervals(corrected, term, c)
     parameters = VOCABULARY[term].PARAMS
-    absent = [
-        _absence(name, parameters[name].absent)
-        for name in intervals
-        if parameters[name].allows_absence(intervals[name])
-    ]
-    verdict = grade(removal, rivals, implausible, held_out, s.bic_margin, s.heldout_margin, absent)
+    absent = []
+    if c.unexplained is None:
+        intervals = _parameter_intervals(corrected, term, c)
+        absent = [
+            _absence(name, parameters[name].absent)
+            for name in intervals
+            if parameters[name].allows_absence(intervals[name])
+        ]
+    else:  # a profile of a model that misses the data bounds nothing
+        intervals = {name: [None, None] for name in parameters}
+    verdict = grade(removal, rivals, implausible, held_out, s.bic_margin, s.heldout_margin, absent, c.unexplained)
     gain = _test_rmse(without, c.samples, c.split) / c.fit["corrected"]["test_rmse"]
     return {
         "term": term,

@@ -20,11 +20,10 @@ def verdict(row) -> str:
     """A spot's verdict in a few words: what was named (with its confidence), or why nothing was."""
     if row["status"] != "ok":
         return FAILED
+    named = " + ".join(f"{term} ({grade})" for term, grade in named_terms(row).items())
     if row["unexplained"]:
-        return UNEXPLAINED
-    if not row["left_out"]:
-        return NOTHING
-    return " + ".join(f"{term} ({grade})" for term, grade in named_terms(row).items())
+        return f"{named} + {UNEXPLAINED}" if named else UNEXPLAINED
+    return named or NOTHING
 
 
 def named_terms(row) -> dict[str, str]:

@@ -38,10 +38,16 @@ def one_sided(interval) -> bool:
     return (low is None) != (high is None)
 
 
-def bounded(value: float | None, interval, spec: str = ".3g", unit: str = "") -> str:
+MISSES_DATA = "from a model that misses the data: no interval holds"
+
+
+def bounded(value: float | None, interval, spec: str = ".3g", unit: str = "", misses_data: bool = False) -> str:
     """A fitted value as the data fix it. Both sides of its 95% interval closed: the value and the interval.
     One side open (a flat profile there): only the bound the data set, '< 3.1e-15 m²', since the fitted
-    value is wherever the flat direction left the fit, not a measurement. Neither: 'not fixed by these data'."""
+    value is wherever the flat direction left the fit, not a measurement. Neither: 'not fixed by these data'.
+    ``misses_data``: the value is what a model that leaves structure unexplained took, which no interval bounds."""
+    if misses_data:
+        return f"{number(value, spec)}{unit} ({MISSES_DATA})"
     low, high = interval
     if low is not None and high is not None:
         return f"{number(value, spec)}{unit} (95%: {low:{spec}} to {high:{spec}}{unit})"
@@ -76,16 +82,19 @@ def _findings(d, apparent, test) -> str:
             )
         return sentence + _permeability_not_fixed(d) + _to_tell_apart(d.confounded)
     sentence = _where(d, ratio, test) + _trend(apparent)
-    if d.unexplained:
-        kept = "the hybrid network's correction is kept, and " if d.fit["hybrid"]["val_rmse"] is not None else ""
-        k = permeability_words(d.permeability["corrected"])
-        return sentence + (
-            f"No term of the vocabulary explains the residual: {kept}K ({k}) comes from a model that misses the "
-            "data, so no interval is given."
-        )
     entries = d.left_out
     names = " and ".join(entry["term"] for entry in entries)
     after = f"{d.fit['corrected']['val_rmse'] / d.noise_floor:.2f}× the noise std"
+    if d.unexplained:
+        kept = "the hybrid network's correction is kept, and " if d.fit["hybrid"]["val_rmse"] is not None else ""
+        k = permeability_words(d.permeability["corrected"])
+        part = "No term of the vocabulary explains the residual: "
+        if entries:
+            part = (
+                f"{names} takes part of it (weak: the validation RMS falls to {after}), but no term of the "
+                "vocabulary explains what is left: "
+            )
+        return sentence + f"{part}{kept}K ({k}) comes from a model that misses the data, so no interval is given."
     if all(entry["confidence"] != "weak" for entry in entries):
         grades = ", ".join(entry["confidence"] for entry in entries)
         return (

@@ -62,7 +62,7 @@ class Trial:
                 return f"{said} (no candidate in these recordings){others}"
             alone = "" if self.alone is None else f" ({strength} {self.alone:.3g} fitted alone)"
             return f"{said}{alone}{others}"
-        found = bounded(self.found, self.interval, ".3g")
+        found = bounded(self.found, self.interval, ".3g", misses_data=self.unexplained)
         size = "" if self.added is None else f"; {number(self.found - native, '.3g')} over the recordings' own"
         beside = f"; beside it {' + '.join(self.others)}" if self.others else ""
         return f"named ({self.confidence}), {strength} {found}{size}{beside}"

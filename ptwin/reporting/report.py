@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ptwin.diagnosis.words import bounded, fluid_off, number, one_sided, permeability_words
+from ptwin.diagnosis.words import MISSES_DATA, bounded, fluid_off, number, one_sided, permeability_words
 from ptwin.physics.model import PLAUSIBLE_PERMEABILITY
 
 NANO = 1e9
@@ -89,7 +89,10 @@ def _where(payload: dict) -> list[str]:
 def _left_out(payload: dict) -> list[str]:
     lines = []
     for entry in payload["left_out"]:
-        params = ", ".join(f"{k} {bounded(v, entry['param_interval'][k], '.4g')}" for k, v in entry["params"].items())
+        params = ", ".join(
+            f"{k} {bounded(v, entry['param_interval'][k], '.4g', misses_data=payload['unexplained'])}"
+            for k, v in entry["params"].items()
+        )
         lines += [
             f"**Left out: `{entry['term']}`**, confidence **{entry['confidence']}** ({params}; test RMSE gain "
             f"{number(entry['test_rmse_gain'], '.2f')}×).",
@@ -111,11 +114,12 @@ def _others(payload: dict) -> list[str]:
             "",
         ]
     if payload["unexplained"]:
-        lines += [
-            "**Unexplained**: structure remains that no term of the vocabulary explains; the hybrid network's "
-            "correction is kept and no term is claimed.",
-            "",
-        ]
+        named = " and ".join(f"`{entry['term']}`" for entry in payload["left_out"])
+        beyond = f" beyond what {named} takes (named, weak)" if named else ""
+        said = ["the hybrid network's correction is kept"] * (payload["fit"]["hybrid"]["val_rmse"] is not None)
+        said += ["no term is claimed"] * (not named)
+        tail = f"; {' and '.join(said)}" if said else ""
+        lines += [f"**Unexplained**: structure remains{beyond} that no term of the vocabulary explains{tail}.", ""]
     return lines
 
 
@@ -164,7 +168,7 @@ def _corrected_k(payload: dict) -> str:
     """The corrected K as the data fix it; none from a model that leaves the data unexplained."""
     p = payload["permeability"]
     if payload["unexplained"]:
-        return f"{permeability_words(p['corrected'], '.4g')} (from a model that misses the data: no interval holds)"
+        return f"{permeability_words(p['corrected'], '.4g')} ({MISSES_DATA})"
     return bounded(p["corrected"], p["corrected_interval"], ".4g", " m²")
 
 
