@@ -15,6 +15,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from ptwin.diagnosis.spatial import FAILED, grid, verdict  # noqa: E402
+from ptwin.reporting.figures import tight  # noqa: E402
 
 MICRO = 1e6
 
@@ -65,7 +66,7 @@ def _map(table: pd.DataFrame, values: pd.Series, label: str):
     shown = ax.imshow(image, origin="lower", extent=extent, cmap="viridis", interpolation="nearest")
     figure.colorbar(shown, ax=ax, label=label)
     ax.text(0.01, -0.16, "blank: spot not diagnosed", transform=ax.transAxes, fontsize=8)
-    figure.tight_layout()
+    tight(figure)
     return figure
 
 
@@ -89,7 +90,7 @@ def _verdict_map(table: pd.DataFrame):
     )
     handles = [matplotlib.patches.Patch(color=c, label=n) for c, n in zip(colours, names)]
     ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=1)
-    figure.tight_layout()
+    tight(figure)
     return figure
 
 
