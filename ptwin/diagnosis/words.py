@@ -91,8 +91,8 @@ def _findings(d, apparent, test) -> str:
         part = "No term of the vocabulary explains the residual: "
         if entries:
             part = (
-                f"{names} takes part of it (weak: the validation RMS falls to {after}), but no term of the "
-                "vocabulary explains what is left: "
+                f"{names} {'take' if len(entries) > 1 else 'takes'} part of it (weak: the validation RMS falls "
+                f"to {after}), but no term of the vocabulary explains what is left: "
             )
         return sentence + f"{part}{kept}K ({k}) comes from a model that misses the data, so no interval is given."
     if all(entry["confidence"] != "weak" for entry in entries):
