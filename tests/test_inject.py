@@ -107,57 +107,56 @@ def test_a_viscosity_added_to_real_noise_is_named(tmp_path, coarse_cache):
 OPEN_DATA = Path(os.environ.get("PTWIN_OPEN_DATA", "-"))  # open_data/ of github.com/Jhko725/NeuralConstitutiveEq.jl
 
 
-@pytest.mark.slow
-@pytest.mark.skipif(
-    not (OPEN_DATA / "PAAM hydrogel").is_dir(),
-    reason="set PTWIN_OPEN_DATA to the open_data folder of Jhko725/NeuralConstitutiveEq.jl (public JPK curves)",
-)
-def test_a_viscosity_added_to_a_real_paam_spot_is_named_with_its_size(tmp_path):
-    # Real recordings that ptwin did not write (Abuhattum et al. 2022, PAAm): one spot at 5 and 15 µm/s, 5 Pa·s
-    # added at first order through the cantilever balance, everything else real. Named with its size over the
-    # recordings' own (5.74 over 0.59 when written), with the default basis and the whole chain.
+def needs_open_data(material: str):
+    """Skip, saying why, where the public JPK curves of ``material`` (a folder of open_data/) are absent."""
+    return pytest.mark.skipif(
+        not (OPEN_DATA / material).is_dir(),
+        reason="set PTWIN_OPEN_DATA to the open_data folder of Jhko725/NeuralConstitutiveEq.jl (public JPK curves)",
+    )
+
+
+def viscosity_added_to_real_curves(tmp_path: Path, material: str, files: list[str]) -> tuple:
+    """(as recorded, 5 Pa·s added) ``Trial``s of the real curves ``files`` ('speed 5/<name>.tab', under
+    open_data/``material``), imported as one recording set, with the default basis and the whole chain."""
     from ptwin.data.import_afm import main as import_afm
 
-    folder = OPEN_DATA / "PAAM hydrogel"
-    files = [folder / "speed 5" / "PAA_speed 5_4nN_3.tab", folder / "speed 15" / "PAA_speed 15_4nN.tab"]
-    recordings = tmp_path / "paam"
+    recordings = tmp_path / "recordings"
     import_afm(
-        [*map(str, files), "--out", str(recordings), "--probe-radius", "5e-6", "--viscosity", "1e-3"]
-        + ["--thickness", "8e-5"]
+        [*(str(OPEN_DATA / material / name) for name in files), "--out", str(recordings), "--probe-radius", "5e-6"]
+        + ["--viscosity", "1e-3", "--thickness", "8e-5"]
     )
     register()
     with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
         cfg = compose("inject", [f"data.path={recordings}", f"cache_dir={tmp_path / 'cache'}", "inject.sizes=[1.0]"])
-    as_recorded, added = detection(typed(cfg), tmp_path / "run", progress=lambda _: None)
+    return detection(typed(cfg), tmp_path / "run", progress=lambda _: None)
+
+
+@pytest.mark.slow
+@needs_open_data("PAAM hydrogel")
+def test_a_viscosity_added_to_a_real_paam_spot_is_named_with_its_size(tmp_path):
+    # Real recordings that ptwin did not write (Abuhattum et al. 2022, PAAm): one spot at 5 and 15 µm/s, 5 Pa·s
+    # added at first order through the cantilever balance, everything else real. Named with its size over the
+    # recordings' own (5.74 over 0.59 when written), with the default basis and the whole chain.
+    files = ["speed 5/PAA_speed 5_4nN_3.tab", "speed 15/PAA_speed 15_4nN.tab"]
+    as_recorded, added = viscosity_added_to_real_curves(tmp_path, "PAAM hydrogel", files)
     assert not as_recorded.confidence
     own = max(as_recorded.alone, 0.0)  # what γ fitted alone gives the recordings as they are
     assert added.confidence and added.found - own == pytest.approx(5.0, rel=0.4)
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(
-    not (OPEN_DATA / "Agarose").is_dir(),
-    reason="set PTWIN_OPEN_DATA to the open_data folder of Jhko725/NeuralConstitutiveEq.jl (public JPK curves)",
-)
+@needs_open_data("Agarose")
 def test_a_viscosity_added_to_a_real_agarose_spot_is_named_beside_what_no_term_explains(tmp_path):
     # Real agarose (Abuhattum et al. 2022), five curves at 5, 10 and 15 µm/s: the recordings as they are leave
     # structure no term explains. With 5 Pa·s added the viscosity passes both tests and is named beside it, weak,
     # with its size (5.54 over the recordings' own 0.62 when written) and no interval: the model misses the data.
-    from ptwin.data.import_afm import main as import_afm
-
-    folder = OPEN_DATA / "Agarose"
-    names = ["5/Agarose_speed 5_2nN", "5/Agarose_speed 5_2nN_1", "10/Agarose_speed 10_2nN"]
-    names += ["15/Agarose_speed 15_2nN", "15/Agarose_speed 15_2nN-1"]
-    files = [folder / f"speed {name.split('/')[0]}" / f"{name.split('/')[1]}.tab" for name in names]
-    recordings = tmp_path / "agarose"
-    import_afm(
-        [*map(str, files), "--out", str(recordings), "--probe-radius", "5e-6", "--viscosity", "1e-3"]
-        + ["--thickness", "8e-5"]
-    )
-    register()
-    with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
-        cfg = compose("inject", [f"data.path={recordings}", f"cache_dir={tmp_path / 'cache'}", "inject.sizes=[1.0]"])
-    as_recorded, added = detection(typed(cfg), tmp_path / "run", progress=lambda _: None)
+    files = [
+        "speed 5/Agarose_speed 5_2nN.tab",
+        "speed 5/Agarose_speed 5_2nN_1.tab",
+        "speed 10/Agarose_speed 10_2nN.tab",
+    ]
+    files += ["speed 15/Agarose_speed 15_2nN.tab", "speed 15/Agarose_speed 15_2nN-1.tab"]
+    as_recorded, added = viscosity_added_to_real_curves(tmp_path, "Agarose", files)
     assert as_recorded.unexplained and not as_recorded.confidence
     own = max(as_recorded.alone, 0.0)
     assert added.unexplained and added.confidence == "weak" and added.interval == [None, None]
