@@ -63,8 +63,10 @@ def quadrature(force: np.ndarray, time: np.ndarray, alpha: float) -> np.ndarray:
     return result
 
 
-@pytest.mark.parametrize("alpha", [0.05, 0.3])
+@pytest.mark.parametrize("alpha", [0.05, 0.3, 0.45])
 def test_a_recorded_ramp_and_hold_matches_direct_quadrature(alpha):
+    # Within 5e-5: the fast tail's mass counts on the latest step (truncated at a margin of 1e4 it left 2.6e-4 out
+    # at alpha = 0.45).
     from ptwin.synth.simulator import Experiment, Hold, simulate_curve
 
     curve = simulate_curve(
@@ -78,7 +80,7 @@ def test_a_recorded_ramp_and_hold_matches_direct_quadrature(alpha):
     start = torch.arange(time.numel()) == 0
     ours = ting_integral(elastic, torch.tensor(alpha, dtype=torch.float64), time, start).numpy()
     reference = quadrature(elastic.numpy(), curve.time, alpha)
-    assert np.abs(ours - reference).max() < 2e-4 * np.abs(reference).max()
+    assert np.abs(ours - reference).max() < 5e-5 * np.abs(reference).max()
 
 
 def test_no_power_law_is_the_elastic_force_itself():
