@@ -9,8 +9,10 @@ import torch
 from torch.func import functional_call
 
 from ptwin.data.recordings import load_recordings, write_recordings
+from ptwin.diagnosis import confidence
+from ptwin.diagnosis.confidence import held_out_curves
 from ptwin.fitting.hybrid import ErrorNetwork, hybrid_residual, newton_permeability
-from ptwin.fitting.physics_fit import fit_physics
+from ptwin.fitting.physics_fit import fit_physics, fit_with_starts
 from ptwin.fitting.split import split_samples
 from ptwin.physics.contact import ContactNuisance
 from ptwin.pipeline.identify import identify, per_curve_fits
@@ -231,3 +233,33 @@ def test_a_reference_correction_that_would_leave_the_onset_is_not_kept(coarse_ca
     fit_physics(model, p.samples, p.split.train, settings.optim.physics_fit.iterations)
     assert 0 < model.contact.reach < 1e-7
     assert not model.contact.reference.requires_grad and model.contact.reference.item() == 0.0
+
+
+@pytest.mark.skipif(not SHARED_DRAG.is_dir(), reason="the shared development sets (../shared/bench-sets) are absent")
+def test_a_candidate_fits_or_holds_the_reference_correction_as_the_base_model_did(coarse_cache, monkeypatch):
+    # On the drag set the base model holds the correction (above), and the drag's own fit keeps it freed (χ² 2943
+    # against 2959 held): compared so, the drag would gain what the contact gains too. Fitted with the base model
+    # as its base, it holds the correction as the base model did, and nests it.
+    settings = settings_for(f"data.path={SHARED_DRAG}", "pgd=coarse", f"cache_dir={coarse_cache}")
+    p = prepare(settings, progress=lambda line: None)
+    iterations = settings.optim.physics_fit.iterations
+    base = fit_physics(p.make_model(), p.samples, p.split.train, iterations)
+    own = fit_physics(p.make_model(("cantilever_drag",)), p.samples, p.split.train, iterations)
+    nested = fit_with_starts(p.make_model, ("cantilever_drag",), p.samples, p.split.train, iterations, base)
+    assert base.reference_free is False and own.reference_free is True
+    assert nested.reference_free is False and not nested.model.contact.reference.requires_grad
+    assert nested.chi_square < base.chi_square
+
+    # The held-out curve test refits each model on each fold as its full fit was made: here the drag held, and a
+    # base model taken as fitted with the correction freed (its folds, left to decide, hold it).
+    refits = []
+
+    def recorded(model, *args, **kwargs):
+        refits.append(("named" if len(model.terms) else "smaller", fit_physics(model, *args, **kwargs)))
+        return refits[-1][1]
+
+    monkeypatch.setattr(confidence, "fit_physics", recorded)
+    seen = p.split.judged(p.samples)
+    assert held_out_curves(p.make_model, p.samples, seen, nested, replace(base, reference_free=True)) is not None
+    assert len(refits) == 2 * len(p.samples.curve_ids)
+    assert all(refit.reference_free is (key == "smaller") for key, refit in refits)

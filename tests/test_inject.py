@@ -136,7 +136,7 @@ def viscosity_added_to_real_curves(tmp_path: Path, material: str, files: list[st
 def test_a_viscosity_added_to_a_real_paam_spot_is_named_with_its_size(tmp_path):
     # Real recordings that ptwin did not write (Abuhattum et al. 2022, PAAm): one spot at 5 and 15 µm/s, 5 Pa·s
     # added at first order through the cantilever balance, everything else real. Named with its size over the
-    # recordings' own (5.74 over 0.59 when written), with the default basis and the whole chain.
+    # recordings' own (5.5 over 0.59 at b9b8751, 5.74 before), with the default basis and the whole chain.
     files = ["speed 5/PAA_speed 5_4nN_3.tab", "speed 15/PAA_speed 15_4nN.tab"]
     as_recorded, added = viscosity_added_to_real_curves(tmp_path, "PAAM hydrogel", files)
     assert not as_recorded.confidence
@@ -146,10 +146,12 @@ def test_a_viscosity_added_to_a_real_paam_spot_is_named_with_its_size(tmp_path):
 
 @pytest.mark.slow
 @needs_open_data("Agarose")
-def test_a_viscosity_added_to_a_real_agarose_spot_is_named_beside_what_no_term_explains(tmp_path):
+def test_a_viscosity_added_to_a_real_agarose_spot_is_fitted_with_its_size_beside_what_no_term_explains(tmp_path):
     # Real agarose (Abuhattum et al. 2022), five curves at 5, 10 and 15 µm/s: the recordings as they are leave
-    # structure no term explains. With 5 Pa·s added the viscosity passes both tests and is named beside it, weak,
-    # with its size (5.54 over the recordings' own 0.62 when written) and no interval: the model misses the data.
+    # structure no term explains. With 5 Pa·s added, the viscosity fitted alone finds its size (5.99 over the
+    # recordings' own 0.62 when written), but with the reference's contact held in its model as in the base
+    # model's (they nest), its gain is no evidence beside that structure: still unexplained, nothing named.
+    # Named weak before b9b8751, when the viscosity's model freed the contact the base model held.
     files = [
         "speed 5/Agarose_speed 5_2nN.tab",
         "speed 5/Agarose_speed 5_2nN_1.tab",
@@ -159,8 +161,8 @@ def test_a_viscosity_added_to_a_real_agarose_spot_is_named_beside_what_no_term_e
     as_recorded, added = viscosity_added_to_real_curves(tmp_path, "Agarose", files)
     assert as_recorded.unexplained and not as_recorded.confidence
     own = max(as_recorded.alone, 0.0)
-    assert added.unexplained and added.confidence == "weak" and added.interval == [None, None]
-    assert added.found - own == pytest.approx(5.0, rel=0.4)
+    assert added.unexplained and not added.confidence
+    assert added.alone - own == pytest.approx(5.0, rel=0.4)
 
 
 def test_values_that_do_not_match_the_terms_parameters_are_refused_in_one_line():

@@ -64,13 +64,13 @@ def test_the_permeabilities_a_term_starts_from_follow_its_hooks_and_its_contact_
     def make_model(terms, values, permeability=None):
         return SimpleNamespace(permeability=permeability, contact=None)
 
-    def fit_physics(model, *rest):
+    def fit_physics(model, *rest, **options):
         asked.append(model.permeability)
         return SimpleNamespace(chi_square=1.0, physical=True)
 
     monkeypatch.setattr(physics_fit, "cheapest", lambda models, samples, index: list(models)[-1])
     monkeypatch.setattr(physics_fit, "fit_physics", fit_physics)
-    fluid_off, base = physics_fit.PLAUSIBLE_PERMEABILITY[1], SimpleNamespace(permeability=3e-16)
+    fluid_off, base = physics_fit.PLAUSIBLE_PERMEABILITY[1], SimpleNamespace(permeability=3e-16, reference_free=None)
     for terms, starts in (
         (("pore_pressure_relaxation",), [None]),
         (("pore_pressure_relaxation", "strain_dependent_permeability"), [None]),
@@ -93,7 +93,9 @@ def test_each_permeability_start_is_fitted_whole_and_the_lower_chi_square_kept(m
     whole = {None: 2414.2, physics_fit.PLAUSIBLE_PERMEABILITY[1]: 2121.5}
     monkeypatch.setattr(physics_fit, "cheapest", lambda models, samples, index: list(models)[-1])
     monkeypatch.setattr(
-        physics_fit, "fit_physics", lambda model, *rest: SimpleNamespace(chi_square=whole[model], physical=True)
+        physics_fit,
+        "fit_physics",
+        lambda model, *rest, **options: SimpleNamespace(chi_square=whole[model], physical=True),
     )  # no base model given: the two K alone
     fit = physics_fit.fit_with_starts(lambda terms, values, permeability=None: permeability, ("solid_viscosity",), 0, 0)
     assert fit.chi_square == 2121.5
@@ -106,12 +108,12 @@ def test_a_physical_fit_is_kept_over_a_non_physical_one_of_lower_chi_square(monk
 
     import ptwin.fitting.physics_fit as physics_fit
 
-    base = SimpleNamespace(permeability=6.4e-16, model=None)
+    base = SimpleNamespace(permeability=6.4e-16, model=None, reference_free=None)
     fits = iter([(3843.8, False), (3875.7, True), (19719.0, True), (4631.7, True)])  # in the order of the starts
     monkeypatch.setattr(physics_fit, "cheapest", lambda models, samples, index: list(models)[-1])
     monkeypatch.setattr(physics_fit, "_nested", lambda make_model, terms, base: "nested")
 
-    def fit_physics(model, *rest):
+    def fit_physics(model, *rest, **options):
         chi_square, physical = next(fits)
         return SimpleNamespace(chi_square=chi_square, physical=physical)
 

@@ -55,7 +55,8 @@ def held_out_curves(
     smaller: PhysicsFit,
 ) -> HeldOut | None:
     """``named`` against ``smaller`` on curves left out one at a time (None with fewer than two fitted
-    curves, or when a fold cannot be fitted); fits start from the full fits' values."""
+    curves, or when a fold cannot be fitted); fits start from the full fits' values, the reference's contact
+    correction fitted or held as in the full fits (``ptwin.fitting.physics_fit.fit_with_starts``)."""
     if len(samples.curve_ids) < 2:
         return None
     errors = {"named": 0.0, "smaller": 0.0}
@@ -71,7 +72,7 @@ def held_out_curves(
         for key, fit in (("named", named), ("smaller", smaller)):
             model = make_model(fit.terms, fit.params, fit.permeability)
             try:
-                refit = fit_physics(model, samples, rest, FOLD_ITERATIONS)
+                refit = fit_physics(model, samples, rest, FOLD_ITERATIONS, reference_free=fit.reference_free)
             except FitError:
                 return None
             with torch.no_grad():
