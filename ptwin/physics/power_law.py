@@ -50,7 +50,12 @@ def _log_rates(shortest: float, longest: float, device=None) -> tuple[float, flo
 def relaxation_times(shortest: float, longest: float, device=None) -> torch.Tensor:
     """τ_j [s] (M,) of ``kernel_modes``: they depend on the time scales alone, not on α."""
     _, high, _, u = _log_rates(shortest, longest, device)
-    return T0 * torch.exp(-torch.cat([u, torch.tensor([high], dtype=torch.float64, device=device)]))
+    return _times(u, high)
+
+
+def _times(u: torch.Tensor, high: float) -> torch.Tensor:
+    """τ_j = t0·e^(−u_j) [s] of the grid's midpoints ``u``, then the fast tail's mode at its edge ``high``."""
+    return T0 * torch.exp(-torch.cat([u, u.new_tensor([high])]))
 
 
 def kernel_modes(alpha: torch.Tensor, shortest: float, longest: float):
@@ -63,8 +68,7 @@ def kernel_modes(alpha: torch.Tensor, shortest: float, longest: float):
     # The fast tail's mass m as a mode of τ = e^(−u_high): weight m/τ.
     # No finite mass where α ≥ 1 (the kernel is not integrable at τ = 0): an infinite weight, a force no fit accepts.
     tail = alpha * torch.exp(alpha * high) * scale / (1.0 - alpha).clamp(min=0.0)
-    times = relaxation_times(shortest, longest, alpha.device)
-    return torch.exp(alpha * low) * scale, torch.cat([weights, tail[None]]), times
+    return torch.exp(alpha * low) * scale, torch.cat([weights, tail[None]]), _times(u, high)
 
 
 def time_scales(time: torch.Tensor) -> tuple[float, float]:
