@@ -11,7 +11,7 @@ from hydra import compose, initialize_config_dir
 
 from ptwin.app import register, typed
 from ptwin.data.recordings import load_recordings
-from ptwin.pipeline.inject import Trial, added_force, detection, detection_limits, detection_section
+from ptwin.pipeline.inject import BASE_PERMEABILITY, Trial, added_force, detection, detection_limits, detection_section
 from ptwin.pipeline.prepare import prepare
 from tests.conftest import CONFIGS, simulated_set
 
@@ -52,6 +52,10 @@ def test_a_viscosity_added_to_a_set_is_found_with_its_size(tmp_path, coarse_cach
     assert abs(as_recorded.alone) < 1.0 and f"gamma {as_recorded.alone:.3g} fitted alone" in as_recorded.verdict(
         "gamma", 0.0
     )
+    assert (
+        as_recorded.permeability
+        == json.loads((tmp_path / "run" / "as-recorded" / "diagnosis.json").read_text())["permeability"]["base"]
+    )
     assert added.confidence and added.found == pytest.approx(5.0, rel=0.4)
     report = (tmp_path / "run" / "as-recorded" / "report.md").read_text()
     assert "## What these recordings could have shown" in report and "The smallest gamma named: 5" in report
@@ -73,6 +77,22 @@ def test_a_verdict_says_which_other_terms_the_diagnosis_named():
     assert "beside" not in alone.verdict("gamma", 0.0) and "the diagnosis named" not in alone.verdict("gamma", 0.0)
 
 
+def test_a_term_not_named_comes_with_the_base_model_permeability():
+    # Real agarose B with 5 Pa s added: the base model's K fell from the limit of no fluid force to 1.17e-15 m²,
+    # its fluid force carrying the viscosity; the verdict said only "unexplained (gamma 2.51 fitted alone)".
+    as_recorded = Trial(0.0, None, 0.0, "", None, [None, None], True, True, -2.48, permeability=1.58e-9)
+    added = Trial(1.0, 5.0, 35.2, "", None, [None, None], True, True, 2.51, permeability=1.17e-15)
+    assert as_recorded.verdict("gamma", 0.0) == (
+        "unexplained (gamma -2.48 fitted alone; the base model's K at the field's 1e-09 m² limit or beyond: no fluid "
+        "force)"
+    )
+    assert added.verdict("gamma", 0.0) == "unexplained (gamma 2.51 fitted alone; the base model's K 1.17e-15 m²)"
+    nothing_fitted = Trial(1.0, 5.0, 35.2, "", None, [None, None], False, False, permeability=2e-15)
+    assert nothing_fitted.verdict("gamma", 0.0) == (
+        "not named (no candidate in these recordings; the base model's K 2e-15 m²)"
+    )
+
+
 def test_a_size_named_beside_unexplained_structure_is_given_without_an_interval():
     # Real agarose A with 5 Pa s added: the viscosity named beside structure no term explains. "gamma not fixed by
     # these data" hid the size it took; the words say where the missing interval comes from instead.
@@ -91,7 +111,7 @@ def test_the_section_says_which_rule_left_an_added_term_unnamed():
         Trial(2.0, 10.0, 52.0, "moderate", 11.2, [9.8, 12.5], False, True),
     ]
     section = detection_section("solid_viscosity", "gamma", trials, 0.0, ["solid_viscosity"])
-    assert f"- gamma 5 added: {pruned}" in section
+    assert f"- gamma 5 added: {pruned}" in section and section[2].endswith(BASE_PERMEABILITY)
     assert not any("as recorded" in line and line.startswith("- ") for line in section)  # the sizes added only
     assert sum(line.startswith("- ") for line in section) == 1  # none for the size named
 

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from ptwin.data.recordings import write_recordings
-from ptwin.diagnosis.words import bounded, number
+from ptwin.diagnosis.words import bounded, number, permeability_words
 from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, fit_physics, fit_with_starts
 from ptwin.physics.model import total
@@ -33,6 +33,11 @@ from ptwin.physics.terms import VOCABULARY
 from ptwin.pipeline.prepare import Prepared, prepare
 from ptwin.pipeline.run import RunResult, candidate_settings, run
 from ptwin.pipeline.settings import InjectRunSettings
+
+BASE_PERMEABILITY = (
+    "Beside a term not named, the base model's K: a rate force added can be carried by the base model's fluid force "
+    "instead, and K falls for it."
+)
 
 
 @dataclass
@@ -50,18 +55,23 @@ class Trial:
     alone: float | None = None  # the strength fitted with the term alone beside the base model, named or not
     others: tuple[str, ...] = ()  # the other terms the diagnosis named, each with its confidence
     why: tuple[str, ...] = ()  # where it was not named: the diagnosis's notes on the term (which rule left it out)
+    permeability: float | None = None  # the base model's K in this diagnosis [m²]
 
     def verdict(self, strength: str, native: float) -> str:
         """What the diagnosis said of the term, in words, and of any other term it named (a term added and
         read as another is the worst answer: "not named" alone would hide it); ``native``: the strength the
-        recordings fit as they are (``native_strength``)."""
+        recordings fit as they are (``native_strength``). A term not named comes with the base model's K
+        (``BASE_PERMEABILITY``; real agarose with 5 Pa·s added: from the limit of no fluid force to 1.2e-15 m²)."""
         others = f"; the diagnosis named {' + '.join(self.others)}" if self.others else ""
         if not self.confidence:
             said = "unexplained" if self.unexplained else "not named"
             if not self.candidate:
-                return f"{said} (no candidate in these recordings){others}"
-            alone = "" if self.alone is None else f" ({strength} {self.alone:.3g} fitted alone)"
-            return f"{said}{alone}{others}"
+                fitted = "no candidate in these recordings"
+            else:
+                fitted = None if self.alone is None else f"{strength} {self.alone:.3g} fitted alone"
+            base = None if self.permeability is None else f"the base model's K {permeability_words(self.permeability)}"
+            what = "; ".join(part for part in (fitted, base) if part)
+            return f"{said} ({what}){others}" if what else f"{said}{others}"
         found = bounded(self.found, self.interval, ".3g", misses_data=self.unexplained)
         size = "" if self.added is None else f"; {number(self.found - native, '.3g')} over the recordings' own"
         beside = f"; beside it {' + '.join(self.others)}" if self.others else ""
@@ -218,7 +228,7 @@ def limits_section(found: dict[str, list[Trial]], native: dict[str, float]) -> l
         "else as recorded, at sizes whose peak is "
         + ", ".join(f"{p:g}" for p in LADDER)
         + "× the noise std, smallest first, until named (`python -m ptwin.inject inject.term=all`; method and "
-        "limits in `ptwin/pipeline/inject.py`).",
+        "limits in `ptwin/pipeline/inject.py`). " + BASE_PERMEABILITY,
         "",
         "| term | smallest size named | peak / noise std | verdict there | largest tried and not named |",
         "|---|---|---|---|---|",
@@ -249,14 +259,16 @@ def _quiet(_: str) -> None:
 
 def _trial(size: float, added: float | None, peak: float, outcome: RunResult, term: str, strength: str) -> Trial:
     diagnosis, candidate = outcome.diagnosis, term in outcome.candidates
+    unexplained, permeability = diagnosis["unexplained"], diagnosis["permeability"]["base"]
     others = tuple(f"{e['term']} ({e['confidence']})" for e in diagnosis["left_out"] if e["term"] != term)
     entry = next((e for e in diagnosis["left_out"] if e["term"] == term), None)
     if entry is None:
         alone = (outcome.candidates.get(term) or {}).get(strength)
         why = tuple(note for note in diagnosis["notes"] if term in note)
-        return Trial(size, added, peak, "", None, [None, None], diagnosis["unexplained"], candidate, alone, others, why)
+        return Trial(
+            size, added, peak, "", None, [None, None], unexplained, candidate, alone, others, why, permeability
+        )
     value, interval = entry["params"][strength], entry["param_interval"][strength]
-    unexplained = diagnosis["unexplained"]
     return Trial(size, added, peak, entry["confidence"], value, interval, unexplained, candidate, others=others)
 
 
@@ -295,7 +307,7 @@ def detection_section(term: str, strength: str, trials: list[Trial], native: flo
         "## What these recordings could have shown",
         "",
         f"`{term}` added to these recordings at first order through the cantilever balance, everything else as "
-        "recorded (`python -m ptwin.inject`; method and limits in `ptwin/pipeline/inject.py`).",
+        "recorded (`python -m ptwin.inject`; method and limits in `ptwin/pipeline/inject.py`). " + BASE_PERMEABILITY,
         "",
         f"| {strength} added | peak added force / noise std | verdict |",
         "|---|---|---|",
