@@ -100,6 +100,50 @@ def test_choose_takes_the_lowest_physical_bic_then_prunes_what_does_not_pay_twic
     assert choose(candidates, 10.0, HeldOutTest(white, np.zeros(1000, dtype=bool), 0.01))[0] == ()
 
 
+def test_a_term_that_only_keeps_another_physical_is_weighed_with_it_against_the_model_without_both():
+    import numpy as np
+
+    from ptwin.diagnosis.name import HeldOutTest, choose, weighed_against
+    from ptwin.diagnosis.null import ScaledF, StructureTest
+
+    # Real agarose with 5 Pa s added: pore_pressure_relaxation alone implied an elastic law that falls with depth,
+    # power_law_rheology beside it kept it physical, and weighed against that unphysical fit it could never be
+    # pruned. Here b keeps a physical and the pair beats the base model by 4.5 BIC only: nothing is named.
+    rng = np.random.default_rng(7)
+    noise, shape = rng.standard_normal(1000), np.sqrt(np.linspace(0.0, 1.0, 1000))
+    white = StructureTest(ScaledF(1.0, 1.0, math.inf), {}, 0.01, 0.0, rng.standard_normal((1000, 200)))
+    held_out = HeldOutTest(white, np.arange(1000) % 5 == 0, 0.01)
+    candidates = {
+        c.terms: c
+        for c in (
+            candidate((), 1100.0, 1.1, residual=noise + shape),
+            candidate(("a",), 1000.0, 1.0, {"a": "the elastic law it implies falls"}, residual=noise),
+            candidate(("b",), 1105.0, 1.1, residual=noise + shape),
+            candidate(("a", "b"), 1080.0, 1.0, residual=noise),
+        )
+    }
+    assert candidates[()].fit.bic - candidates[("a", "b")].fit.bic == pytest.approx(4.5, abs=0.1)
+    assert weighed_against(candidates, ("a", "b"), "b") == ()  # a alone is not physical: the base model
+    assert weighed_against(candidates, ("a", "b"), "a") == ("b",)
+    chosen, notes = choose(candidates, 10.0, held_out)
+    assert chosen == ()
+    assert notes[-1].startswith("b pruned together with a (not physical without b): removing it costs 4.5 BIC")
+    # The same pair 23 BIC better than the base model: both are kept, the pair weighed whole.
+    better = {**candidates, ("a", "b"): candidate(("a", "b"), 1060.0, 1.0, residual=noise)}
+    assert choose(better, 10.0, held_out) == (("a", "b"), [])
+
+
+def test_a_term_that_predicts_left_out_curves_worse_is_said_to():
+    from ptwin.diagnosis.confidence import HeldOut, grade
+    from ptwin.diagnosis.diagnose import _times_better
+
+    # Real agarose: "it predicts 0.56× better" and "improves the prediction by only -44%" said the opposite.
+    assert _times_better(0.56) == "1.79× worse" and _times_better(1.38) == "1.38× better"
+    worse = grade(112.0, [], None, HeldOut(0.56, {}, 3), 10.0, 0.05)
+    assert worse.confidence == "weak"
+    assert "on curves left out of the fit it predicts worse (79% more error)" in worse.reasons
+
+
 class AboveFive:
     """A structure test whose threshold is 5 (what the null distribution gives is tested in test_null)."""
 

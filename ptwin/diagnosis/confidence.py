@@ -139,7 +139,11 @@ def grade(
     if held_out is None:
         mild.append("too few curves to test it on a curve it was not fitted to")
     else:
-        if held_out.gain < 1 + heldout_margin:
+        if held_out.gain < 1:
+            serious.append(
+                f"on curves left out of the fit it predicts worse ({100 * (1 / held_out.gain - 1):.0f}% more error)"
+            )
+        elif held_out.gain < 1 + heldout_margin:
             serious.append(
                 f"on curves left out of the fit it improves the prediction by only "
                 f"{100 * (held_out.gain - 1):.0f}% (needs {100 * heldout_margin:.0f}%)"

@@ -14,7 +14,16 @@ from ptwin.diagnosis.confidence import Grade, HeldOut, grade, held_out_curves
 from ptwin.diagnosis.design import MAX_REPEATS, ExperimentDesign, Prediction
 from ptwin.diagnosis.intervals import profile_interval, within
 from ptwin.diagnosis.locate import Mismatch, locate
-from ptwin.diagnosis.name import Candidate, HeldOutTest, choose, confounded, fit_candidates, rejected, shape_evidence
+from ptwin.diagnosis.name import (
+    Candidate,
+    HeldOutTest,
+    choose,
+    confounded,
+    fit_candidates,
+    rejected,
+    shape_evidence,
+    weighed_against,
+)
 from ptwin.diagnosis.null import (
     MODEL_ERROR,
     StructureTest,
@@ -458,8 +467,8 @@ def _make_strong(left_out: list[dict], chosen, candidates: dict, design: Experim
         if entry["confidence"] == "strong":
             continue
         progress(f"diagnosis: the experiment that would make {entry['term']} strong")
-        smaller = tuple(t for t in chosen if t != entry["term"])
-        fits = [candidates[chosen].fit, candidates.get(smaller, candidates[()]).fit]
+        smaller = weighed_against(candidates, chosen, entry["term"])
+        fits = [candidates[chosen].fit, candidates[smaller].fit]
         names = [" + ".join(chosen), " + ".join(smaller) or "base model"]
         proposal = design.propose(names, fits)
         if proposal is not None:
@@ -471,7 +480,7 @@ def _make_strong(left_out: list[dict], chosen, candidates: dict, design: Experim
 def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: DiagnosisSettings) -> dict:
     """The contract's ``left_out`` item of one named term: values, intervals, grade, evidence in words."""
     corrected = c.corrected.fit
-    without = c.candidates.get(tuple(t for t in chosen if t != term), c.candidates[()])
+    without = c.candidates[weighed_against(c.candidates, chosen, term)]
     held_out = held_out_curves(make_model, c.samples, c.seen, corrected, without.fit)
     removal = without.fit.bic - corrected.bic
     rivals = [" + ".join(t) or "the base model" for t in alternatives]
@@ -502,13 +511,15 @@ def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: Diag
 
 def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut | None, verdict: Grade, c) -> str:
     corrected = c.corrected
+    others = [t for t in corrected.terms if t != term and t not in without.terms]  # ``weighed_against``'s
+    beside = f" (together with {' + '.join(others)}, which is not physical without it)" if others else ""
     sentence = (
-        f"With {term} refitted jointly with K, the BIC under the noise model falls by {removal:.0f} and the "
+        f"With {term}{beside} refitted jointly with K, the BIC under the noise model falls by {removal:.0f} and the "
         f"validation RMS from {without.val_rmse * 1e9:.3g} to {corrected.val_rmse * 1e9:.3g} nN "
         f"({corrected.val_rmse / c.noise.std:.2f}× the noise std)"
     )
     if held_out is not None:
-        sentence += f"; on curves left out of the fit it predicts {held_out.gain:.2f}× better"
+        sentence += f"; on curves left out of the fit it predicts {_times_better(held_out.gain)}"
     if c.witness is not None and c.witness > -1.0:
         sentence += f"; it accounts for {100 * c.witness:.0f}% of the error the hybrid network learned"
     elif c.witness is not None:  # the network learned far less than the term adds: no witness either way
@@ -522,6 +533,11 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut |
     if verdict.reasons:
         sentence += f" Confidence {verdict.confidence}: " + "; ".join(verdict.reasons) + "."
     return sentence
+
+
+def _times_better(gain: float) -> str:
+    """'1.38× better', or '1.79× worse' for a gain below 1 (a ratio of test RMSEs, without over with)."""
+    return f"{gain:.2f}× better" if gain >= 1 else f"{1 / gain:.2f}× worse"
 
 
 def _permeability_notes(fit: PhysicsFit, samples: Samples) -> list[str]:

@@ -235,7 +235,9 @@ def _gain(test, validation, smaller, larger, parameters: int, label: str, false_
 
 
 def choose(candidates: dict, bic_margin: float, held_out: HeldOutTest) -> tuple[tuple[str, ...], list[str]]:
-    """The accepted subset and the reasons for every term pruned on the way."""
+    """The accepted subset and the reasons for every term pruned on the way. Each term is weighed against
+    ``weighed_against``'s subset: where the chosen set without it is not physical, a term that only keeps another
+    physical is pruned with that other unless the two together pay."""
     usable = {t: c for t, c in candidates.items() if c.usable}
     chosen = min(usable, key=lambda t: usable[t].fit.bic)
     notes = []
@@ -243,19 +245,40 @@ def choose(candidates: dict, bic_margin: float, held_out: HeldOutTest) -> tuple[
     while pruned and chosen:
         pruned = False
         for term in chosen:
-            without = tuple(t for t in chosen if t != term)
-            if without not in usable:
+            without = weighed_against(usable, chosen, term)
+            if without not in usable:  # not even the base model is usable: nothing to weigh it against
                 continue
             bic_cost = usable[without].fit.bic - usable[chosen].fit.bic
             gain = held_out.evidence(usable[without], usable[chosen], term)
             if bic_cost < bic_margin or not gain.beyond:
                 notes.append(
-                    f"{term} pruned: removing it costs {bic_cost:.1f} BIC (needs ≥ {bic_margin:g}), and on the "
-                    f"validation samples {gain.words()}"
+                    f"{term} pruned{_with_others(chosen, without, term)}: removing it costs {bic_cost:.1f} BIC (needs "
+                    f"≥ {bic_margin:g}), and on the validation samples {gain.words()}"
                 )
                 chosen, pruned = without, True
                 break
     return chosen, notes
+
+
+def weighed_against(candidates: dict, chosen: tuple[str, ...], term: str) -> tuple[str, ...]:
+    """The subset a named ``term`` is weighed against: ``chosen`` without it where that model is usable, else its
+    usable subset of least BIC (the base model at least). A model that is not physical explains nothing, so a term
+    that only keeps another physical is weighed with that other against the model without both: real agarose
+    with 5 Pa·s added named pore_pressure_relaxation + power_law_rheology, where pore_pressure_relaxation alone
+    implies an elastic law that falls with depth and power_law_rheology costs 22 BIC beside it; weighed against
+    that model, its evidence read "the BIC falls by -22" and it was never prunable."""
+    without = tuple(t for t in chosen if t != term)
+    subsets = [t for t, c in candidates.items() if c.usable and set(t) <= set(without)]
+    if without in subsets:
+        return without
+    return min(subsets, key=lambda t: candidates[t].fit.bic, default=())
+
+
+def _with_others(chosen: tuple[str, ...], without: tuple[str, ...], term: str) -> str:
+    """Words for the other terms ``without`` drops beside ``term`` (the chosen set without ``term`` is not
+    physical), or ''."""
+    others = [t for t in chosen if t != term and t not in without]
+    return f" together with {' + '.join(others)} (not physical without {term})" if others else ""
 
 
 def confounded(candidates: dict, chosen: tuple[str, ...], bic_margin: float, held_out: HeldOutTest):
