@@ -43,3 +43,23 @@ def test_one_speed_ratio_says_it_cannot_tell_the_growth(tmp_path):
     sentence = rate_effect(curves, curves[0]).sentence()
     assert "One speed ratio cannot show" in sentence and not any(w in sentence for w in ("nan", "inf"))
     assert math.isfinite(rate_effect(curves, curves[0]).profiles[0].median)
+
+
+def test_a_faster_curve_softer_than_the_reference_is_said_to_differ_by_more_than_rate(tmp_path):
+    # Real agarose B: its 15 µm/s curve, from another spot, at 0.71–0.83 of the 5 µm/s one at equal depth. Here the
+    # fastest of a power-law set is scaled to 80% (a spot a fifth softer): said, with its ratio; the others not.
+    meta, frame = simulate(Experiment(**STIFF, effects={"power_law_rheology": {"alpha": 0.05}}))
+    fastest = frame["curve"] == frame["curve"].unique()[-1]
+    frame.loc[fastest, "force"] *= 0.8
+    write_recordings(tmp_path, meta, frame)
+    curves = curve_kinematics(load_recordings(tmp_path))
+    effect = rate_effect(curves, curves[0])
+    softer = [p for p in effect.profiles if p.median < 1]
+    assert [p.curve for p in softer] == [curves[-1].curve]
+    assert softer[0].median == pytest.approx(0.8 * 9**0.05, abs=0.01)
+    sentence = effect.sentence()
+    assert (
+        f"Faster yet softer than {curves[0].curve} (median F/F_{curves[0].curve}): {curves[-1].curve} 0.8" in sentence
+    )
+    assert "differ by more than rate" in sentence and curves[1].curve + " 1." not in sentence.split("Faster")[1]
+    assert "Faster yet softer" not in effect_of(tmp_path / "clean", power_law_rheology={"alpha": 0.05}).sentence()

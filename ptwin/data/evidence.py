@@ -105,6 +105,7 @@ RATIO_FLOOR = 20.0  # a force ratio is read only where the slow curve's force ex
 RATIO_BINS = 20
 FASTER = 1.2  # curves at least this much faster than the reference show a rate effect
 CLEARER = 4.0  # how much more one growth law must be contradicted than the other to be named
+SOFTER = 3.0  # standard errors below a ratio of 1 that call a faster curve softer than the reference
 
 
 @dataclass
@@ -146,7 +147,22 @@ class RateEffect:
             for p in self.profiles
         )
         text = f"Rate effect before any model, F/F_{self.reference} at equal depth: {ratios}."
-        return text + " " + self._growth()
+        return text + " " + self._growth() + self._softer()
+
+    def _softer(self) -> str:
+        """Faster curves softer than the reference beyond ``SOFTER`` standard errors of their median ratio: every
+        rate force stiffens a faster curve at equal depth (a viscosity, a drag, Darcy flow, a relaxing or
+        power-law solid alike), so such curves differ by more than rate (real agarose, one spot's 15 µm/s curve
+        at 0.71–0.83 of another's 5 µm/s one); '' where none is."""
+        softer = [p for p in self.profiles if p.median + SOFTER * p.median_std < 1.0]
+        if not softer:
+            return ""
+        listing = ", ".join(f"{p.curve} {p.median:.3f} ± {p.median_std:.3f}" for p in softer)
+        return (
+            f" Faster yet softer than {self.reference} (median F/F_{self.reference}): {listing}. A rate force only "
+            "stiffens a faster curve, so these curves differ by more than rate: in their spots' stiffness or in "
+            "their contacts."
+        )
 
     def _growth(self) -> str:
         """How the excess grows with speed: a power law keeps ln r / ln(v/v_ref) (its alpha) the same at
