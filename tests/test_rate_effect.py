@@ -62,4 +62,5 @@ def test_a_faster_curve_softer_than_the_reference_is_said_to_differ_by_more_than
         f"Faster yet softer than {curves[0].curve} (median F/F_{curves[0].curve}): {curves[-1].curve} 0.8" in sentence
     )
     assert "differ by more than rate" in sentence and curves[1].curve + " 1." not in sentence.split("Faster")[1]
+    assert "Growth with speed" not in sentence  # a negative excess has no growth to read
     assert "Faster yet softer" not in effect_of(tmp_path / "clean", power_law_rheology={"alpha": 0.05}).sentence()

@@ -147,21 +147,22 @@ class RateEffect:
             for p in self.profiles
         )
         text = f"Rate effect before any model, F/F_{self.reference} at equal depth: {ratios}."
-        return text + " " + self._growth() + self._softer()
+        return text + " " + (self._softer() or self._growth())
 
     def _softer(self) -> str:
         """Faster curves softer than the reference beyond ``SOFTER`` standard errors of their median ratio: every
         rate force stiffens a faster curve at equal depth (a viscosity, a drag, Darcy flow, a relaxing or
         power-law solid alike), so such curves differ by more than rate (real agarose, one spot's 15 µm/s curve
-        at 0.71–0.83 of another's 5 µm/s one); '' where none is."""
+        at 0.71–0.83 of another's 5 µm/s one), and how the excess grows with speed reads nothing; '' where none
+        is."""
         softer = [p for p in self.profiles if p.median + SOFTER * p.median_std < 1.0]
         if not softer:
             return ""
         listing = ", ".join(f"{p.curve} {p.median:.3f} ± {p.median_std:.3f}" for p in softer)
         return (
-            f" Faster yet softer than {self.reference} (median F/F_{self.reference}): {listing}. A rate force only "
-            "stiffens a faster curve, so these curves differ by more than rate: in their spots' stiffness or in "
-            "their contacts."
+            f"Faster yet softer than {self.reference} (median F/F_{self.reference}): {listing}. A rate force only "
+            "stiffens a faster curve, so these curves differ by more than rate, in their spots' stiffness or in "
+            "their contacts, and how the excess grows with speed is not read."
         )
 
     def _growth(self) -> str:
