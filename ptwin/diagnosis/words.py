@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from ptwin.physics.model import PLAUSIBLE_PERMEABILITY
+from ptwin.physics.model import PLAUSIBLE_PERMEABILITY, fluid_off
 
 MICRO = 1e6
 MATERIAL = 0.02  # a relative difference in K worth saying that K is not fixed
@@ -132,13 +132,6 @@ def _permeability_not_fixed(d) -> str:
     return f" K is not fixed by these data: {listing}{covers}."
 
 
-def fluid_off(k: float) -> bool:
-    """K within 1% of the top of the field's range, or beyond: fits start there to try a model without fluid
-    (``physics_fit.fit_with_starts``), and one that stays there, or runs past it, has no fluid force left to fix
-    K by. Such a K is no value but that limit (``NO_FLUID``)."""
-    return k >= 0.99 * PLAUSIBLE_PERMEABILITY[1]
-
-
 def permeability_words(k: float | None, spec: str = ".3g") -> str:
     """'2.7e-15 m²', or the limit a K without fluid force sits at."""
     return f"{NO_FLUID}: no fluid force" if k is not None and fluid_off(k) else f"{number(k, spec)} m²"
@@ -190,12 +183,19 @@ def _where(d, ratio: float, test) -> str:
 
 
 def _trend(apparent) -> str:
-    """The trend of the plateau permeability with speed, where there is one to measure (and it was)."""
+    """The trend of the plateau permeability with speed, where there is one to measure (and it was); a plateau
+    whose K no fluid force fixes is a bound, no value, and is said as such."""
     if apparent is None:
         return ""
+    bounds = [curve for curve, row in apparent.plateau.items() if row.get("unfixed")]
+    beside = (
+        f"; at {', '.join(bounds)} no fluid force fixes it: the force is at or below the elastic law, or K {NO_FLUID}"
+        if bounds
+        else ""
+    )
     if not (math.isfinite(apparent.slope) and math.isfinite(apparent.slope_std)):
-        return "The plateau permeability cannot be compared across speeds (fewer than two fitted speeds). "
+        return f"The plateau permeability cannot be compared across speeds (fewer than two fitted speeds{beside}). "
     return (
         f"The plateau permeability changes with speed by {apparent.slope:.2g} m² per decade "
-        f"({number(apparent.slope_significance, '.1f')} standard errors). "
+        f"({number(apparent.slope_significance, '.1f')} standard errors{beside}). "
     )

@@ -21,6 +21,13 @@ PERMEABILITY = "fluid.log_permeability"  # K's name among a ForceModel's paramet
 PLAUSIBLE_PERMEABILITY = (1e-24, 1e-9)
 
 
+def fluid_off(k):
+    """K [m²] within 1% of the top of ``PLAUSIBLE_PERMEABILITY``, or beyond (a float, or a tensor elementwise):
+    fits start there to try a model without fluid (``physics_fit.fit_with_starts``), and a K that stays there,
+    or runs past it, has no fluid force left to fix it by. Such a K is no value but that limit."""
+    return k >= 0.99 * PLAUSIBLE_PERMEABILITY[1]
+
+
 def smooth_contact_radius(depth: torch.Tensor, probe_radius: float) -> torch.Tensor:
     """R = sqrt(ρ² − (ρ − w)²), 0 for w ≤ 0, with finite gradients at w = 0 [m]."""
     inside = depth > 0

@@ -222,7 +222,10 @@ def _permeability_against_speed(apparent, base, corrected_per_curve):
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("base speed [µm/s]")
     ax.set_ylabel("K [m²]")
-    ax.set_title(f"K against speed: slope {apparent.slope:.2g} ± {apparent.slope_std:.1g} m²/decade")
+    if np.isfinite(apparent.slope) and np.isfinite(apparent.slope_std):
+        ax.set_title(f"K against speed: slope {apparent.slope:.2g} ± {apparent.slope_std:.1g} m²/decade")
+    else:
+        ax.set_title("K against speed: too few speeds whose plateau K a fluid force fixes for a slope")
     ax.legend(fontsize=7)
     tight(figure)
     return figure

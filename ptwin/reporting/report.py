@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ptwin.diagnosis.words import MISSES_DATA, bounded, fluid_off, number, one_sided, permeability_words
-from ptwin.physics.model import PLAUSIBLE_PERMEABILITY
+from ptwin.diagnosis.words import MISSES_DATA, bounded, number, one_sided, permeability_words
+from ptwin.physics.model import PLAUSIBLE_PERMEABILITY, fluid_off
 
 NANO = 1e9
 LABELS = {"elastic_darcy": "1 elastic + Darcy", "viscous": "2 + viscous (K, gamma)", "hybrid": "3 hybrid twin"}
