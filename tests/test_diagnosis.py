@@ -127,7 +127,7 @@ def test_a_term_that_only_keeps_another_physical_is_weighed_with_it_against_the_
     assert weighed_against(candidates, ("a", "b"), "a") == ("b",)
     chosen, notes = choose(candidates, 10.0, held_out)
     assert chosen == ()
-    assert notes[-1].startswith("b pruned together with a (not physical without b): removing it costs 4.5 BIC")
+    assert notes[-1].startswith("b pruned together with a (no explanation without b): removing it costs 4.5 BIC")
     # The same pair 23 BIC better than the base model: both are kept, the pair weighed whole.
     better = {**candidates, ("a", "b"): candidate(("a", "b"), 1060.0, 1.0, residual=noise)}
     assert choose(better, 10.0, held_out) == (("a", "b"), [])
@@ -139,6 +139,7 @@ def test_a_term_that_predicts_left_out_curves_worse_is_said_to():
 
     # Real agarose: "it predicts 0.56× better" and "improves the prediction by only -44%" said the opposite.
     assert _times_better(0.56) == "1.79× worse" and _times_better(1.38) == "1.38× better"
+    assert _times_better(0.0) == "worse"  # no division by zero
     worse = grade(112.0, [], None, HeldOut(0.56, {}, 3), 10.0, 0.05)
     assert worse.confidence == "weak"
     assert "on curves left out of the fit it predicts worse (79% more error)" in worse.reasons

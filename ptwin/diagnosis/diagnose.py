@@ -512,7 +512,7 @@ def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: Diag
 def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut | None, verdict: Grade, c) -> str:
     corrected = c.corrected
     others = [t for t in corrected.terms if t != term and t not in without.terms]  # ``weighed_against``'s
-    beside = f" (together with {' + '.join(others)}, which is not physical without it)" if others else ""
+    beside = f" (together with {' + '.join(others)}, no explanation without it)" if others else ""
     sentence = (
         f"With {term}{beside} refitted jointly with K, the BIC under the noise model falls by {removal:.0f} and the "
         f"validation RMS from {without.val_rmse * 1e9:.3g} to {corrected.val_rmse * 1e9:.3g} nN "
@@ -537,7 +537,9 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut |
 
 def _times_better(gain: float) -> str:
     """'1.38× better', or '1.79× worse' for a gain below 1 (a ratio of test RMSEs, without over with)."""
-    return f"{gain:.2f}× better" if gain >= 1 else f"{1 / gain:.2f}× worse"
+    if gain >= 1:
+        return f"{gain:.2f}× better"
+    return f"{1 / gain:.2f}× worse" if gain > 0 else "worse"
 
 
 def _permeability_notes(fit: PhysicsFit, samples: Samples) -> list[str]:

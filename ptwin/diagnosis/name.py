@@ -236,8 +236,8 @@ def _gain(test, validation, smaller, larger, parameters: int, label: str, false_
 
 def choose(candidates: dict, bic_margin: float, held_out: HeldOutTest) -> tuple[tuple[str, ...], list[str]]:
     """The accepted subset and the reasons for every term pruned on the way. Each term is weighed against
-    ``weighed_against``'s subset: where the chosen set without it is not physical, a term that only keeps another
-    physical is pruned with that other unless the two together pay."""
+    ``weighed_against``'s subset: where the chosen set without it is not usable, a term that only keeps another
+    physical (or acting) is pruned with that other unless the two together pay."""
     usable = {t: c for t, c in candidates.items() if c.usable}
     chosen = min(usable, key=lambda t: usable[t].fit.bic)
     notes = []
@@ -262,8 +262,9 @@ def choose(candidates: dict, bic_margin: float, held_out: HeldOutTest) -> tuple[
 
 def weighed_against(candidates: dict, chosen: tuple[str, ...], term: str) -> tuple[str, ...]:
     """The subset a named ``term`` is weighed against: ``chosen`` without it where that model is usable, else its
-    usable subset of least BIC (the base model at least). A model that is not physical explains nothing, so a term
-    that only keeps another physical is weighed with that other against the model without both: real agarose
+    usable subset of least BIC (the base model at least). A model that is not physical, or in which a term does
+    nothing, explains nothing, so a term that only keeps another usable is weighed with that other against the
+    model without both: real agarose
     with 5 Pa·s added named pore_pressure_relaxation + power_law_rheology, where pore_pressure_relaxation alone
     implies an elastic law that falls with depth and power_law_rheology costs 22 BIC beside it; weighed against
     that model, its evidence read "the BIC falls by -22" and it was never prunable."""
@@ -275,10 +276,10 @@ def weighed_against(candidates: dict, chosen: tuple[str, ...], term: str) -> tup
 
 
 def _with_others(chosen: tuple[str, ...], without: tuple[str, ...], term: str) -> str:
-    """Words for the other terms ``without`` drops beside ``term`` (the chosen set without ``term`` is not
-    physical), or ''."""
+    """Words for the other terms ``without`` drops beside ``term`` (the chosen set without ``term`` is not usable:
+    not physical, or a term in it does nothing), or ''."""
     others = [t for t in chosen if t != term and t not in without]
-    return f" together with {' + '.join(others)} (not physical without {term})" if others else ""
+    return f" together with {' + '.join(others)} (no explanation without {term})" if others else ""
 
 
 def confounded(candidates: dict, chosen: tuple[str, ...], bic_margin: float, held_out: HeldOutTest):
