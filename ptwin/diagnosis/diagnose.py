@@ -22,6 +22,7 @@ from ptwin.diagnosis.name import (
     fit_candidates,
     rejected,
     shape_evidence,
+    together_with,
     weighed_against,
 )
 from ptwin.diagnosis.null import (
@@ -511,8 +512,7 @@ def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: Diag
 
 def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut | None, verdict: Grade, c) -> str:
     corrected = c.corrected
-    others = [t for t in corrected.terms if t != term and t not in without.terms]  # ``weighed_against``'s
-    beside = f" (together with {' + '.join(others)}, no explanation without it)" if others else ""
+    beside = together_with(corrected.terms, without.terms, term)  # the terms weighed with it, if any
     sentence = (
         f"With {term}{beside} refitted jointly with K, the BIC under the noise model falls by {removal:.0f} and the "
         f"validation RMS from {without.val_rmse * 1e9:.3g} to {corrected.val_rmse * 1e9:.3g} nN "

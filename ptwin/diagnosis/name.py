@@ -252,7 +252,7 @@ def choose(candidates: dict, bic_margin: float, held_out: HeldOutTest) -> tuple[
             gain = held_out.evidence(usable[without], usable[chosen], term)
             if bic_cost < bic_margin or not gain.beyond:
                 notes.append(
-                    f"{term} pruned{_with_others(chosen, without, term)}: removing it costs {bic_cost:.1f} BIC (needs "
+                    f"{term} pruned{together_with(chosen, without, term)}: removing it costs {bic_cost:.1f} BIC (needs "
                     f"≥ {bic_margin:g}), and on the validation samples {gain.words()}"
                 )
                 chosen, pruned = without, True
@@ -264,10 +264,9 @@ def weighed_against(candidates: dict, chosen: tuple[str, ...], term: str) -> tup
     """The subset a named ``term`` is weighed against: ``chosen`` without it where that model is usable, else its
     usable subset of least BIC (the base model at least). A model that is not physical, or in which a term does
     nothing, explains nothing, so a term that only keeps another usable is weighed with that other against the
-    model without both: real agarose
-    with 5 Pa·s added named pore_pressure_relaxation + power_law_rheology, where pore_pressure_relaxation alone
-    implies an elastic law that falls with depth and power_law_rheology costs 22 BIC beside it; weighed against
-    that model, its evidence read "the BIC falls by -22" and it was never prunable."""
+    model without both: real agarose with 5 Pa·s added named pore_pressure_relaxation + power_law_rheology, where
+    pore_pressure_relaxation alone implies an elastic law that falls with depth and power_law_rheology costs 22 BIC
+    beside it; weighed against that model, its evidence read "the BIC falls by -22" and it was never prunable."""
     without = tuple(t for t in chosen if t != term)
     subsets = [t for t, c in candidates.items() if c.usable and set(t) <= set(without)]
     if without in subsets:
@@ -275,9 +274,9 @@ def weighed_against(candidates: dict, chosen: tuple[str, ...], term: str) -> tup
     return min(subsets, key=lambda t: candidates[t].fit.bic, default=())
 
 
-def _with_others(chosen: tuple[str, ...], without: tuple[str, ...], term: str) -> str:
-    """Words for the other terms ``without`` drops beside ``term`` (the chosen set without ``term`` is not usable:
-    not physical, or a term in it does nothing), or ''."""
+def together_with(chosen: tuple[str, ...], without: tuple[str, ...], term: str) -> str:
+    """Words for the other terms ``without`` (``weighed_against``'s) drops beside ``term``, the chosen set without
+    ``term`` being no explanation (not physical, or a term in it does nothing); '' where it drops none."""
     others = [t for t in chosen if t != term and t not in without]
     return f" together with {' + '.join(others)} (no explanation without {term})" if others else ""
 
