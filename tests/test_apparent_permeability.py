@@ -6,6 +6,7 @@ from types import SimpleNamespace
 
 import torch
 
+from ptwin.data.recordings import APPROACH
 from ptwin.diagnosis.words import _trend
 from ptwin.fitting.physics_fit import fit_physics
 from ptwin.fitting.pointwise import _weighted_slope, apparent_permeability
@@ -31,6 +32,23 @@ def test_a_gel_without_fluid_force_has_its_plateaus_said_to_be_bounds(tmp_path, 
     assert "nan" not in sentence
     fitted = apparent_permeability(base.model, prepared.samples, base.permeability)  # the gel as simulated
     assert not any(row["unfixed"] for row in fitted.plateau.values()) and math.isfinite(fitted.slope)
+
+
+def test_a_curve_whose_approach_is_not_fitted_has_no_plateau_and_is_no_bound(tmp_path, coarse_cache):
+    # A JPK creep of a polymer gel (afmformats' test file), the set's one curve and so its reference: only its creep
+    # is fitted (its approach is the elastic law). Its plateau row had no speed (figures 5 and 6 were not drawn:
+    # "Data cannot be log-scaled") and the trend called it a bound "no fluid force fixes".
+    folder = simulated_set(tmp_path / "set")
+    prepared = prepare(settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda _: None)
+    base = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+    samples = prepared.samples
+    first = (samples.curve == 0) & (samples.segment == APPROACH)
+    unfitted = replace(samples, in_contact=samples.in_contact & ~first)
+    apparent = apparent_permeability(base.model, unfitted, base.permeability)
+    row = apparent.plateau[samples.curve_ids[0]]
+    assert row["base_speed"] == samples.nominal_speed[first][0].item() > 0
+    assert row["samples"] == 0 and math.isnan(row["mean"]) and not row["unfixed"]
+    assert samples.curve_ids[0] not in _trend(apparent)
 
 
 def test_a_bound_beside_fitted_plateaus_is_named_in_the_trend():

@@ -69,17 +69,18 @@ def apparent_permeability(
 
     plateau = {}
     for i, curve in enumerate(samples.curve_ids):
-        mine = (samples.curve == i) & samples.in_contact & (samples.segment == APPROACH)  # the approach
+        approach = (samples.curve == i) & (samples.segment == APPROACH)
+        mine = approach & samples.in_contact  # none on the reference curve: its approach is the elastic law
         deep = mine & (samples.depth >= plateau_from * samples.depth[mine].max()) if mine.any() else mine
         values = permeability[deep]
         values = values[~values.isnan() & ~fluid_off(values)]
         # Most of the plateau without a K its fluid force fixes (the force at or below the elastic law: no root; or K
         # at the field's limit or beyond): K there is a bound, no value, and the few samples noise lifted say nothing
         # (real agarose, a softer spot's 15 µm/s curve: 10 of 109 samples with a root, their mean 1.1e-14 m²).
-        unfixed = values.numel() <= 0.5 * int(deep.sum())
+        unfixed = bool(deep.any()) and values.numel() <= 0.5 * int(deep.sum())
         values = values[:0] if unfixed else values
         plateau[curve] = {
-            "base_speed": samples.nominal_speed[mine][0].item() if mine.any() else math.nan,
+            "base_speed": samples.nominal_speed[approach][0].item() if approach.any() else math.nan,
             "mean": values.mean().item() if values.numel() else math.nan,
             "std_error": (values.std() / math.sqrt(values.numel())).item() if values.numel() > 1 else math.nan,
             "samples": int(values.numel()),

@@ -225,7 +225,8 @@ def _permeability_against_speed(apparent, base, corrected_per_curve):
     if np.isfinite(apparent.slope) and np.isfinite(apparent.slope_std):
         ax.set_title(f"K against speed: slope {apparent.slope:.2g} ± {apparent.slope_std:.1g} m²/decade")
     else:
-        ax.set_title("K against speed: too few speeds whose plateau K a fluid force fixes for a slope")
+        no_slope = "K against speed: no slope\n(fewer than two speeds whose plateau K a fluid force fixes)"
+        ax.set_title(no_slope, fontsize=10)
     ax.legend(fontsize=7)
     tight(figure)
     return figure
