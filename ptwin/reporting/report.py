@@ -29,13 +29,23 @@ def _nano(value) -> str:
     return number(None if value is None else value * NANO, ".3f")
 
 
+def _stage_k(stage: dict) -> str:
+    """A stage's K as its fit found it, without its curvature std (kept in results.json): that std is no interval
+    where the stage's model misses the data or K's profile is flat (real PAAm: ± 6% beside "K is not fixed by
+    these data"), and the interval the data support is the diagnosis's own row. A fit that is not physical says so."""
+    value = stage["permeability"]
+    if value is not None and fluid_off(value):
+        return _k(value)
+    reason = stage.get("note", "").split(":")[0]
+    return number(value, ".4g") + (f" ({reason}: not physical)" if reason else "")
+
+
 def summary_rows(results: dict) -> list[tuple[str, str, str, str]]:
     rows = []
     for key, label in LABELS.items():
         stage = results["stages"].get(key)
         if stage is not None:
-            permeability = _k(stage["permeability"], stage.get("permeability_std"))
-            rows.append((label, permeability, _nano(stage["val_rmse"]), _nano(stage["test_rmse"])))
+            rows.append((label, _stage_k(stage), _nano(stage["val_rmse"]), _nano(stage["test_rmse"])))
     return rows
 
 
@@ -51,9 +61,10 @@ def print_summary(results: dict, diagnosis: dict, progress=print) -> None:
     elif permeability["corrected_std"] is None and low is not None:  # rivals widened it: the interval, no std
         corrected = f"{number(permeability['corrected'], '.3g')} [{low:.2g}, {high:.2g}]"
     rows.append(("diagnosis: corrected", corrected, _nano(fit["val_rmse"]), _nano(fit["test_rmse"])))
-    progress(f"{'stage':<26s} {'K [m²]':>24s} {'val RMSE nN':>12s} {'test RMSE nN':>13s}")
+    width = max(24, *(len(row[1]) for row in rows))
+    progress(f"{'stage':<26s} {'K [m²]':>{width}s} {'val RMSE nN':>12s} {'test RMSE nN':>13s}")
     for row in rows:
-        progress(f"{row[0]:<26s} {row[1]:>24s} {row[2]:>12s} {row[3]:>13s}")
+        progress(f"{row[0]:<26s} {row[1]:>{width}s} {row[2]:>12s} {row[3]:>13s}")
     progress(f"noise floor {_nano(results['noise_floor'])} nN")
     progress(f"diagnosis: {diagnosis['mismatch']['summary']}")
 
@@ -175,4 +186,5 @@ def _corrected_k(payload: dict) -> str:
 def _chain(results: dict) -> list[str]:
     lines = ["## Identification chain", "", "| stage | K [m²] | val RMSE [nN] | test RMSE [nN] |", "|---|---|---|---|"]
     lines += [f"| {' | '.join(row)} |" for row in summary_rows(results)]
+    lines += ["", "Each stage's K as its fit found it; how far the data fix K is the Fit section's interval above."]
     return [*lines, ""]
