@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import torch
 
+from ptwin.diagnosis.words import times_better
 from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, fit_physics
 from ptwin.physics.samples import Samples
@@ -140,9 +141,7 @@ def grade(
         mild.append("too few curves to test it on a curve it was not fitted to")
     else:
         if held_out.gain < 1:
-            serious.append(
-                f"on curves left out of the fit it predicts worse ({100 * (1 / held_out.gain - 1):.0f}% more error)"
-            )
+            serious.append(f"on curves left out of the fit it predicts {times_better(held_out.gain)}")
         elif held_out.gain < 1 + heldout_margin:
             serious.append(
                 f"on curves left out of the fit it improves the prediction by only "

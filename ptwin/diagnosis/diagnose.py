@@ -32,7 +32,7 @@ from ptwin.diagnosis.null import (
     beyond_model_error,
     structure_test,
 )
-from ptwin.diagnosis.words import MATERIAL, finite_or_none, summarise
+from ptwin.diagnosis.words import MATERIAL, finite_or_none, summarise, times_better
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import rmse_of
 from ptwin.fitting.physics_fit import PhysicsFit, rmse
@@ -519,7 +519,7 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut |
         f"({corrected.val_rmse / c.noise.std:.2f}× the noise std)"
     )
     if held_out is not None:
-        sentence += f"; on curves left out of the fit it predicts {_times_better(held_out.gain)}"
+        sentence += f"; on curves left out of the fit it predicts {times_better(held_out.gain)}"
     if c.witness is not None and c.witness > -1.0:
         sentence += f"; it accounts for {100 * c.witness:.0f}% of the error the hybrid network learned"
     elif c.witness is not None:  # the network learned far less than the term adds: no witness either way
@@ -533,13 +533,6 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut |
     if verdict.reasons:
         sentence += f" Confidence {verdict.confidence}: " + "; ".join(verdict.reasons) + "."
     return sentence
-
-
-def _times_better(gain: float) -> str:
-    """'1.38× better', or '1.79× worse' for a gain below 1 (a ratio of test RMSEs, without over with)."""
-    if gain >= 1:
-        return f"{gain:.2f}× better"
-    return f"{1 / gain:.2f}× worse" if gain > 0 else "worse"
 
 
 def _permeability_notes(fit: PhysicsFit, samples: Samples) -> list[str]:

@@ -182,6 +182,13 @@ def _where(d, ratio: float, test) -> str:
     )
 
 
+def times_better(gain: float) -> str:
+    """'1.38× better', or '1.79× worse' for a gain below 1 (a ratio of test RMSEs, without over with)."""
+    if gain >= 1:
+        return f"{gain:.2f}× better"
+    return f"{1 / gain:.2f}× worse" if gain > 0 else "worse"
+
+
 def _trend(apparent) -> str:
     """The trend of the plateau permeability with speed, where there is one to measure (and it was); a plateau
     whose K no fluid force fixes is a bound, no value, and is said as such."""
