@@ -487,6 +487,15 @@ def test_a_term_named_beside_unexplained_structure_gets_no_interval_and_says_why
     assert f"no term of the vocabulary explains ({left})" in entry["evidence"] and "gamma = 0" not in entry["evidence"]
 
 
+def test_the_networks_witness_is_never_a_negative_share():
+    # Real PAAm E as recorded: "it accounts for -57% of the error the hybrid network learned".
+    from ptwin.diagnosis.diagnose import _witness_words
+
+    assert _witness_words(0.8) == "it accounts for 80% of the error the hybrid network learned"
+    assert "-" not in _witness_words(-0.57) and "other than the term's" in _witness_words(-0.57)
+    assert "learned little" in _witness_words(-2.0)
+
+
 @pytest.mark.parametrize("named", [[], [{"term": "solid_viscosity", "confidence": "weak"}]])
 def test_structure_no_term_explains_is_said_beside_what_a_term_takes_of_it(named):
     from types import SimpleNamespace

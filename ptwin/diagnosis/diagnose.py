@@ -398,6 +398,15 @@ def _explained_fraction(network: torch.Tensor, named: torch.Tensor) -> float:
     return 1.0 - (network - named).square().sum().item() / max(network.square().sum().item(), 1e-300)
 
 
+def _witness_words(witness: float) -> str:
+    """What the hybrid network's learned error says of the named terms' correction (``_explained_fraction``)."""
+    if witness >= 0.0:
+        return f"it accounts for {100 * witness:.0f}% of the error the hybrid network learned"
+    if witness > -1.0:  # real PAAm E read "it accounts for -57% of the error the hybrid network learned"
+        return "the hybrid network learned a correction other than the term's (they differ by more than the network's)"
+    return "the hybrid network learned little of this error at its chosen regularisation"  # far less than the term adds
+
+
 def _confound(chosen: tuple[str, ...], other: tuple[str, ...], candidates: dict) -> dict:
     """A confounded group: the two subsets (the empty one is the base model), what tells them apart, and
     the K [m²] each gives."""
@@ -520,10 +529,8 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut |
     )
     if held_out is not None:
         sentence += f"; on curves left out of the fit it predicts {times_better(held_out.gain)}"
-    if c.witness is not None and c.witness > -1.0:
-        sentence += f"; it accounts for {100 * c.witness:.0f}% of the error the hybrid network learned"
-    elif c.witness is not None:  # the network learned far less than the term adds: no witness either way
-        sentence += "; the hybrid network learned little of this error at its chosen regularisation"
+    if c.witness is not None:
+        sentence += f"; {_witness_words(c.witness)}"
     sentence += "."
     correlated = [
         name for name, value in corrected.fit.correlation_with_permeability[term].items() if abs(value) > CORRELATED
