@@ -403,7 +403,7 @@ def _witness_words(witness: float) -> str:
     if witness >= 0.0:
         return f"it accounts for {100 * witness:.0f}% of the error the hybrid network learned"
     if witness > -1.0:  # real PAAm E read "it accounts for -57% of the error the hybrid network learned"
-        return "the hybrid network learned a correction other than the term's (they differ by more than the network's)"
+        return "the hybrid network learned a correction other than the term's (nearer to none than to the term's)"
     return "the hybrid network learned little of this error at its chosen regularisation"  # far less than the term adds
 
 
