@@ -20,6 +20,17 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
     torch.set_num_threads(1)
 
 
+OPEN_DATA = Path(os.environ.get("PTWIN_OPEN_DATA", "-"))  # open_data/ of github.com/Jhko725/NeuralConstitutiveEq.jl
+
+
+def needs_open_data(material: str):
+    """Skip, saying why, where the public JPK curves of ``material`` (a folder of open_data/) are absent."""
+    return pytest.mark.skipif(
+        not (OPEN_DATA / material).is_dir(),
+        reason="set PTWIN_OPEN_DATA to the open_data folder of Jhko725/NeuralConstitutiveEq.jl (public JPK curves)",
+    )
+
+
 def small_config(**overrides) -> PGDConfig:
     """A coarse basis (seconds to build) with the structure of the real presets."""
     values = dict(

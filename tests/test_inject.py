@@ -2,7 +2,6 @@
 found with its size; and on data ptwin did not write (a shared development set with real PAAm noise)."""
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +12,7 @@ from ptwin.app import register, typed
 from ptwin.data.recordings import load_recordings
 from ptwin.pipeline.inject import BASE_PERMEABILITY, Trial, added_force, detection, detection_limits, detection_section
 from ptwin.pipeline.prepare import prepare
-from tests.conftest import CONFIGS, simulated_set
+from tests.conftest import CONFIGS, OPEN_DATA, needs_open_data, simulated_set
 
 QUICK = ("optim.hybrid.regularisations=[1.0e-2]", "optim.hybrid.iterations=10")
 SHARED_NULL = Path(__file__).resolve().parents[2] / "shared" / "bench-sets" / "p03_null_real_paam_noise" / "data"
@@ -122,17 +121,6 @@ def test_a_viscosity_added_to_real_noise_is_named(tmp_path, coarse_cache):
     settings = inject_settings(SHARED_NULL, coarse_cache, "inject.sizes=[2.0]")
     trials = detection(settings, tmp_path / "run", progress=lambda _: None)
     assert trials[-1].confidence  # 63× the noise at its peak
-
-
-OPEN_DATA = Path(os.environ.get("PTWIN_OPEN_DATA", "-"))  # open_data/ of github.com/Jhko725/NeuralConstitutiveEq.jl
-
-
-def needs_open_data(material: str):
-    """Skip, saying why, where the public JPK curves of ``material`` (a folder of open_data/) are absent."""
-    return pytest.mark.skipif(
-        not (OPEN_DATA / material).is_dir(),
-        reason="set PTWIN_OPEN_DATA to the open_data folder of Jhko725/NeuralConstitutiveEq.jl (public JPK curves)",
-    )
 
 
 def viscosity_added_to_real_curves(tmp_path: Path, material: str, files: list[str]) -> tuple:
