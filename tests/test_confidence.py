@@ -38,8 +38,8 @@ def test_a_term_whose_interval_reaches_where_it_does_nothing_is_weak():
 
 
 def test_a_term_named_beside_unexplained_structure_is_weak_and_says_why():
-    # Real agarose A with 5 Pa·s added: the viscosity passes the BIC margin and the held-out test, but leaves
-    # structure no term explains; its γ is what it takes in a model that misses the data.
+    # Real agarose A with 5 Pa·s added: the viscosity passes the BIC margin and the held-out test on the validation
+    # samples, but leaves structure no term explains; its γ is what it takes in a model that misses the data.
     left = "whiteness 30.8 against 5.7, what noise alone exceeds one time in 100"
     verdict = grade(500.0, [], None, GOOD, bic_margin=10.0, heldout_margin=0.1, unexplained=left)
     assert verdict.confidence == "weak"

@@ -292,8 +292,9 @@ def _select(
             return _Selection(True, chosen, notes=notes)
         if chosen:
             notes.append(
-                f"{' + '.join(chosen)} passes the BIC margin and the held-out test but leaves structure "
-                f"({test.words(corrected.whiteness)}): named, weak, beside what no term of the vocabulary explains"
+                f"{' + '.join(chosen)} passes the BIC margin and the held-out test on the validation samples but "
+                f"leaves structure ({test.words(corrected.whiteness)}): named, weak, beside what no term of the "
+                f"vocabulary explains"
             )
         return _Selection(True, chosen, unexplained=True, notes=notes)
     proven = [label for label, e in evidence.items() if e.beyond]
