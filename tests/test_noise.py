@@ -193,6 +193,23 @@ def test_real_paam_approaches_that_start_off_their_level_read_as_close_to_white_
         assert curve.noise.unsettled > 0 and curve.noise.inflation < 2.05  # 2.0 and 1.37; 4.15 and 4.86 left in
 
 
+def test_what_the_noise_model_leaves_out_of_a_baseline_is_said(tmp_path, coarse_cache):
+    # Nothing is dropped unsaid: the first blocks of v4's baseline sit 5σ off its line, and the notes say so.
+    import pandas as pd
+
+    from ptwin.pipeline.prepare import prepare
+    from tests.conftest import settings_for, simulated_set
+
+    folder = simulated_set(tmp_path / "set", z_start=-2e-6, samples=1200)
+    table = pd.read_csv(folder / "curves.csv")
+    first = table.index[table["curve"] == "v4"][:50]
+    table.loc[first, "force"] += 1.5e-9
+    table.to_csv(folder / "curves.csv", index=False)
+    prepared = prepare(settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda _: None)
+    said = [note for note in prepared.notes if "left out of its noise model" in note]
+    assert len(said) == 1 and said[0].startswith("v4: the first 50 samples of its pre-contact baseline")
+
+
 @pytest.mark.parametrize(("lag1", "size"), [(0.0, 300), (0.9, 500), (0.99, 1000)])
 def test_stationary_noise_is_rarely_taken_for_a_start_off_its_level(lag1, size):
     # The block means' own scatter sets the ceiling: 0.9–1.8% of 6-block records, at most 0.8% of 10-block ones and

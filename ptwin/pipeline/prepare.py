@@ -125,6 +125,7 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     reference = next(c for c in curves if c.curve == meta.reference_curve)
     law = ReferenceCurve(reference, settings.model.elastic_nodes, settings.model.elastic_smoothing)
     fitted, notes = _fitted_curves(recordings, curves, reference, law)
+    notes += [_unsettled_note(c) for c in curves if c.noise.unsettled]
     noise = pooled(
         [c.noise for c in curves],
         [max(int(c.in_contact.sum()), 1) for c in curves],
@@ -215,6 +216,16 @@ def _fitted_curves(recordings: RecordingSet, curves, reference, law: ReferenceCu
     if not fitted:
         raise UnsupportedSet(f"{recordings.path}: no curve besides the reference has samples in contact to fit")
     return fitted, notes
+
+
+def _unsettled_note(curve: CurveKinematics) -> str:
+    """What the noise model left out of a curve's baseline, and why (``ptwin.data.noise.settled``,
+    ``level_settled``): nothing is dropped unsaid."""
+    return (
+        f"{curve.curve}: the first {curve.noise.unsettled} samples of its pre-contact baseline are left out of its "
+        f"noise model: they had not settled as the approach began (the cantilever ringing, or the force off the "
+        f"baseline's line)."
+    )
 
 
 def _spot_note(curves) -> str | None:
