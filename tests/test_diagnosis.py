@@ -587,12 +587,12 @@ def test_the_identification_table_gives_no_k_the_data_cannot_fix():
     # Real agarose B as recorded: stage 1 read '1.579e-09 ± 0.00034', a K past the field with a std 2e5 times it.
     # A JPK creep of a polymer gel (afmformats' test file): stage 2 read '1.733e-17 ± 8.3e-20' at gamma = -244.
     # Real PAAm A with 5 Pa·s added: '4.83e-16 ± 3.1e-17' in the table, "K is not fixed by these data" above it.
-    from ptwin.reporting.report import summary_rows
+    from ptwin.reporting.report import NOT_PHYSICAL, summary_rows
 
     rmse = {"val_rmse": 3e-11, "test_rmse": 3e-11}
     stages = {
         "elastic_darcy": {"permeability": 1.579e-9, "permeability_std": 3.4e-4, **rmse},
-        "viscous": {"permeability": 1.733e-17, "permeability_std": 8.3e-20, "note": "gamma < 0: non-physical", **rmse},
+        "viscous": {"permeability": 1.733e-17, "permeability_std": 8.3e-20, "note": f"gamma < 0{NOT_PHYSICAL}", **rmse},
         "hybrid": {"permeability": 4.83e-16, "permeability_std": 3.1e-17, "note": "", **rmse},
     }
     rows = [row[1] for row in summary_rows({"stages": stages})]

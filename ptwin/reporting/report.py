@@ -13,6 +13,7 @@ from ptwin.physics.model import PLAUSIBLE_PERMEABILITY, fluid_off
 
 NANO = 1e9
 LABELS = {"elastic_darcy": "1 elastic + Darcy", "viscous": "2 + viscous (K, gamma)", "hybrid": "3 hybrid twin"}
+NOT_PHYSICAL = ": non-physical, rejected as an explanation"  # ends a stage's note after its violations (results.json)
 
 
 def _k(value, std=None) -> str:
@@ -36,7 +37,7 @@ def _stage_k(stage: dict) -> str:
     value = stage["permeability"]
     if value is not None and fluid_off(value):
         return _k(value)
-    reason = stage.get("note", "").split(":")[0]
+    reason = stage.get("note", "").removesuffix(NOT_PHYSICAL)
     return number(value, ".4g") + (f" ({reason}: not physical)" if reason else "")
 
 

@@ -18,7 +18,7 @@ from ptwin.fitting.physics_fit import PhysicsFit, rmse
 from ptwin.fitting.pointwise import ApparentPermeability
 from ptwin.fitting.split import Split
 from ptwin.physics.samples import Samples
-from ptwin.reporting.report import write_report
+from ptwin.reporting.report import NOT_PHYSICAL, write_report
 
 
 def physics_stage(fit: PhysicsFit, samples: Samples, split: Split) -> dict:
@@ -31,7 +31,7 @@ def physics_stage(fit: PhysicsFit, samples: Samples, split: Split) -> dict:
         "param_std": fit.param_std,
         "val_rmse": rmse(fit.model, samples, split.val),
         "test_rmse": rmse(fit.model, samples, split.test),
-        "note": f"{reasons}: non-physical, rejected as an explanation" if reasons else "",
+        "note": f"{reasons}{NOT_PHYSICAL}" if reasons else "",
     }
 
 
