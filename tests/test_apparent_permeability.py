@@ -4,6 +4,7 @@ import math
 from dataclasses import replace
 from types import SimpleNamespace
 
+import pytest
 import torch
 
 from ptwin.data.recordings import APPROACH
@@ -14,13 +15,19 @@ from ptwin.pipeline.prepare import prepare
 from tests.conftest import settings_for, simulated_set
 
 
-def test_a_gel_without_fluid_force_has_its_plateaus_said_to_be_bounds(tmp_path, coarse_cache):
+@pytest.fixture(scope="module")
+def fitted_set(tmp_path_factory, coarse_cache):
+    """A simulated set, prepared, and its base model fitted (shared by the tests that read its plateaus)."""
+    folder = simulated_set(tmp_path_factory.mktemp("set"))
+    prepared = prepare(settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda _: None)
+    return prepared, fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+
+
+def test_a_gel_without_fluid_force_has_its_plateaus_said_to_be_bounds(fitted_set):
     # Real PAAm (two spots at 15 µm/s beside one at 5): the plateau K of curves where no fluid force is left came
     # out near 0.1 m² and the summary read "the plateau permeability changes with speed by -0.12 m² per decade".
     # Here every curve's force is the elastic law alone (the model at K = 1e-7 m²): every plateau is a bound.
-    folder = simulated_set(tmp_path / "set")
-    prepared = prepare(settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda _: None)
-    base = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+    prepared, base = fitted_set
     with torch.no_grad():
         elastic = prepared.make_model((), None, 1e-7)(prepared.samples)
     apparent = apparent_permeability(base.model, replace(prepared.samples, force=elastic), base.permeability)
@@ -34,13 +41,11 @@ def test_a_gel_without_fluid_force_has_its_plateaus_said_to_be_bounds(tmp_path, 
     assert not any(row["unfixed"] for row in fitted.plateau.values()) and math.isfinite(fitted.slope)
 
 
-def test_a_curve_whose_approach_is_not_fitted_has_no_plateau_and_is_no_bound(tmp_path, coarse_cache):
+def test_a_curve_whose_approach_is_not_fitted_has_no_plateau_and_is_no_bound(fitted_set):
     # A JPK creep of a polymer gel (afmformats' test file), the set's one curve and so its reference: only its creep
     # is fitted (its approach is the elastic law). Its plateau row had no speed (figures 5 and 6 were not drawn:
     # "Data cannot be log-scaled") and the trend called it a bound "no fluid force fixes".
-    folder = simulated_set(tmp_path / "set")
-    prepared = prepare(settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda _: None)
-    base = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+    prepared, base = fitted_set
     samples = prepared.samples
     first = (samples.curve == 0) & (samples.segment == APPROACH)
     unfitted = replace(samples, in_contact=samples.in_contact & ~first)

@@ -21,7 +21,7 @@ from ptwin.data.noise import (
 )
 from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.synth.simulator import Experiment, correlated_noise, simulate
-from tests.conftest import OPEN_DATA, needs_open_data
+from tests.conftest import OPEN_DATA, needs_open_data, settings_for, simulated_set
 
 
 def ar1(lag1, size=20000, std=1.3e-11, seed=0):
@@ -198,7 +198,6 @@ def test_what_the_noise_model_leaves_out_of_a_baseline_is_said(tmp_path, coarse_
     import pandas as pd
 
     from ptwin.pipeline.prepare import prepare
-    from tests.conftest import settings_for, simulated_set
 
     folder = simulated_set(tmp_path / "set", z_start=-2e-6, samples=1200)
     table = pd.read_csv(folder / "curves.csv")

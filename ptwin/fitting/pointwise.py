@@ -97,9 +97,9 @@ def _weighted_slope(plateau: dict[str, dict[str, float]]) -> tuple[float, float]
     rows = [
         p for p in plateau.values() if np.isfinite(p["mean"]) and np.isfinite(p["std_error"]) and p["std_error"] > 0
     ]
-    if np.unique(np.round(np.log10([p["base_speed"] for p in rows]), 3)).size < 2:  # equal up to rounding
-        return math.nan, math.nan
     x = np.log10([p["base_speed"] for p in rows])
+    if np.unique(np.round(x, 3)).size < 2:  # equal up to rounding
+        return math.nan, math.nan
     y = np.array([p["mean"] for p in rows])
     w = 1.0 / np.array([p["std_error"] for p in rows]) ** 2
     xm = (w * x).sum() / w.sum()
