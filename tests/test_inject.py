@@ -2,6 +2,7 @@
 found with its size; and on data ptwin did not write (a shared development set with real PAAm noise)."""
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,15 @@ from hydra import compose, initialize_config_dir
 
 from ptwin.app import register, typed
 from ptwin.data.recordings import load_recordings
-from ptwin.pipeline.inject import BASE_PERMEABILITY, Trial, added_force, detection, detection_limits, detection_section
+from ptwin.pipeline.inject import (
+    BASE_PERMEABILITY,
+    Own,
+    Trial,
+    added_force,
+    detection,
+    detection_limits,
+    detection_section,
+)
 from ptwin.pipeline.prepare import prepare
 from tests.conftest import CONFIGS, OPEN_DATA, needs_open_data, simulated_set
 
@@ -49,7 +58,7 @@ def test_a_viscosity_added_to_a_set_is_found_with_its_size(tmp_path, coarse_cach
     as_recorded, added = trials
     assert not as_recorded.confidence  # the clean set names nothing, and says what gamma fitted alone came to
     assert abs(as_recorded.alone) < 1.0 and f"gamma {as_recorded.alone:.3g} fitted alone" in as_recorded.verdict(
-        "gamma", 0.0
+        Own("gamma", 0.0)
     )
     assert (
         as_recorded.permeability
@@ -66,14 +75,45 @@ def test_a_verdict_says_which_other_terms_the_diagnosis_named():
     # 5 Pa s added to real agarose came back as pore_pressure_relaxation + solid_relaxation; "not named" alone hid it.
     others = ("pore_pressure_relaxation (strong)", "solid_relaxation (weak)")
     missed = Trial(1.0, 5.0, 36.6, "", None, [None, None], False, True, -5.72, others)
-    assert missed.verdict("gamma", 0.0) == (
+    assert missed.verdict(Own("gamma", 0.0)) == (
         "not named (gamma -5.72 fitted alone); the diagnosis named pore_pressure_relaxation (strong) + "
         "solid_relaxation (weak)"
     )
     named = Trial(2.0, 10.0, 73.2, "weak", 9.79, [8.61, 11.1], False, True, others=others[1:])
-    assert named.verdict("gamma", 0.0).endswith("9.79 over the recordings' own; beside it solid_relaxation (weak)")
+    assert named.verdict(Own("gamma", 0.0)).endswith("9.79 over the recordings' own; beside it solid_relaxation (weak)")
     alone = Trial(2.0, 10.0, 73.2, "weak", 9.79, [8.61, 11.1], False, True)
-    assert "beside" not in alone.verdict("gamma", 0.0) and "the diagnosis named" not in alone.verdict("gamma", 0.0)
+    assert "beside" not in alone.verdict(Own("gamma", 0.0)) and "the diagnosis named" not in alone.verdict(
+        Own("gamma", 0.0)
+    )
+
+
+def test_a_term_read_as_another_it_cannot_be_told_from_says_so():
+    # Real-noise PAAm null (bench-set p03) with g 0.33 of solid_relaxation added: the diagnosis named
+    # strain_dependent_permeability (weak) and listed the two as confounded; the verdict read as a wrong answer.
+    named = ("strain_dependent_permeability (weak)",)
+    missed = Trial(64.0, 0.328, 64.0, "", None, [None, None], False, True, 1.86, named, confounded=named)
+    assert missed.verdict(Own("g", 0.0)) == (
+        "not named (g 1.86 fitted alone); the diagnosis named strain_dependent_permeability (weak) in its place: "
+        "these recordings cannot tell the two apart"
+    )
+    both = ("pore_pressure_relaxation (strong)", *named)
+    partly = Trial(64.0, 0.328, 64.0, "", None, [None, None], False, True, 1.86, both, confounded=named)
+    assert partly.verdict(Own("g", 0.0)).endswith(
+        "the diagnosis named pore_pressure_relaxation (strong) + strain_dependent_permeability (weak); "
+        "strain_dependent_permeability (weak) in its place: these recordings cannot tell the two apart"
+    )
+
+
+def test_a_size_found_of_a_term_that_vanishes_as_its_strength_grows_adds_in_its_reciprocal():
+    # Bench-set p01 with a pore relaxation added (M 1.07e4 Pa): found 1.03e4 over the recordings' own 2.05e6, read
+    # as "-2.04e+06 over the recordings' own". Its force is ∝ 1/M: the added 1/M is the difference of the two.
+    own = Own("M", 2.05e6, math.inf)
+    named = Trial(1.0, 1.07e4, 64.7, "weak", 1.03e4, [9.75e3, 1.09e4], False, True)
+    assert named.verdict(own).endswith(f"; {1 / (1 / 1.03e4 - 1 / 2.05e6):.3g} over the recordings' own")
+    assert own.beyond(3e6) is None and Own("M", math.inf, math.inf).beyond(1e4) == pytest.approx(1e4)
+    weaker = Trial(1.0, 1.07e4, 64.7, "weak", 3e6, [2e6, 4e6], False, True)
+    assert weaker.verdict(own).endswith("; no more than the recordings' own")
+    assert Own("M", math.inf, math.inf).words().startswith("M none, the recordings' own")
 
 
 def test_a_term_not_named_comes_with_the_base_model_permeability():
@@ -81,13 +121,13 @@ def test_a_term_not_named_comes_with_the_base_model_permeability():
     # its fluid force carrying the viscosity; the verdict said only "unexplained (gamma 2.51 fitted alone)".
     as_recorded = Trial(0.0, None, 0.0, "", None, [None, None], True, True, -2.48, permeability=1.58e-9)
     added = Trial(1.0, 5.0, 35.2, "", None, [None, None], True, True, 2.51, permeability=1.17e-15)
-    assert as_recorded.verdict("gamma", 0.0) == (
+    assert as_recorded.verdict(Own("gamma", 0.0)) == (
         "unexplained (gamma -2.48 fitted alone; the base model's K at the field's 1e-09 m² limit or beyond: no fluid "
         "force)"
     )
-    assert added.verdict("gamma", 0.0) == "unexplained (gamma 2.51 fitted alone; the base model's K 1.17e-15 m²)"
+    assert added.verdict(Own("gamma", 0.0)) == "unexplained (gamma 2.51 fitted alone; the base model's K 1.17e-15 m²)"
     nothing_fitted = Trial(1.0, 5.0, 35.2, "", None, [None, None], False, False, permeability=2e-15)
-    assert nothing_fitted.verdict("gamma", 0.0) == (
+    assert nothing_fitted.verdict(Own("gamma", 0.0)) == (
         "not named (no candidate in these recordings; the base model's K 2e-15 m²)"
     )
 
@@ -96,7 +136,7 @@ def test_a_size_named_beside_unexplained_structure_is_given_without_an_interval(
     # Real agarose A with 5 Pa s added: the viscosity named beside structure no term explains. "gamma not fixed by
     # these data" hid the size it took; the words say where the missing interval comes from instead.
     named = Trial(1.0, 5.0, 42.8, "weak", 6.15, [None, None], True, True)
-    assert named.verdict("gamma", 0.615) == (
+    assert named.verdict(Own("gamma", 0.615)) == (
         "named (weak), gamma 6.15 (from a model that misses the data: no interval holds); 5.54 over the recordings' own"
     )
 
@@ -109,7 +149,7 @@ def test_the_section_says_which_rule_left_an_added_term_unnamed():
         Trial(1.0, 5.0, 26.0, "", None, [None, None], False, True, 7.03, why=(pruned,)),
         Trial(2.0, 10.0, 52.0, "moderate", 11.2, [9.8, 12.5], False, True),
     ]
-    section = detection_section("solid_viscosity", "gamma", trials, 0.0, ["solid_viscosity"])
+    section = detection_section("solid_viscosity", trials, Own("gamma", 0.0), ["solid_viscosity"])
     assert f"- gamma 5 added: {pruned}" in section and section[2].endswith(BASE_PERMEABILITY)
     assert not any("as recorded" in line and line.startswith("- ") for line in section)  # the sizes added only
     assert sum(line.startswith("- ") for line in section) == 1  # none for the size named

@@ -16,6 +16,7 @@ It is added on the base model's K, even where the data do not fix K.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -40,6 +41,29 @@ BASE_PERMEABILITY = (
 )
 
 
+@dataclass(frozen=True)
+class Own:
+    """The term's strength the recordings fit as they are (``native_strength``): they hold some of any term's
+    shape already (below the naming threshold, or a model error it projects onto), and a size added adds to it."""
+
+    strength: str  # the term's strength parameter (its first)
+    value: float  # the strength fitted; ``absent`` where that fit fails or is not physical
+    absent: float = 0.0  # the strength at which the term does nothing (``Parameter.absent``)
+
+    def beyond(self, found: float) -> float | None:
+        """What a strength ``found`` adds to the recordings' own: the difference for a strength that acts from 0;
+        for one whose term vanishes as it grows (a pore relaxation's M: its force is ∝ 1/M to first order), the
+        strength whose 1/M is the difference of the two; None where ``found`` is no stronger than the own."""
+        if self.absent != math.inf:
+            return found - self.value
+        excess = 1.0 / found - 1.0 / self.value
+        return 1.0 / excess if excess > 0 else None
+
+    def words(self) -> str:
+        value = "none" if self.value == self.absent else f"{self.value:.3g}"
+        return f"{self.strength} {value}, the recordings' own (none where its fit is not physical)"
+
+
 @dataclass
 class Trial:
     """One diagnosis of the recordings with the term added at ``size`` times its strength (0: as recorded)."""
@@ -54,16 +78,24 @@ class Trial:
     candidate: bool  # whether the diagnosis fitted the term at all (see ``no_candidate``)
     alone: float | None = None  # the strength fitted with the term alone beside the base model, named or not
     others: tuple[str, ...] = ()  # the other terms the diagnosis named, each with its confidence
+    # those of ``others`` the diagnosis could not tell from the term (a group of ``diagnosis.json``'s "confounded")
+    confounded: tuple[str, ...] = ()
     why: tuple[str, ...] = ()  # where it was not named: the diagnosis's notes on the term (which rule left it out)
     permeability: float | None = None  # the base model's K in this diagnosis [m²]
 
-    def verdict(self, strength: str, native: float) -> str:
+    def verdict(self, own: Own) -> str:
         """What the diagnosis said of the term, in words, and of any other term it named (a term added and
-        read as another is the worst answer: "not named" alone would hide it); ``native``: the strength the
-        recordings fit as they are (``native_strength``). A term not named comes with the base model's K
-        (``BASE_PERMEABILITY``; real agarose with 5 Pa·s added: from the limit of no fluid force to 1.2e-15 m²)."""
-        others = f"; the diagnosis named {' + '.join(self.others)}" if self.others else ""
+        read as another is the worst answer: "not named" alone would hide it, and where the diagnosis could not
+        tell the two apart it says so); ``own``: the strength the recordings fit as they are. A term not named
+        comes with the base model's K (``BASE_PERMEABILITY``; real agarose with 5 Pa·s added: from the limit
+        of no fluid force to 1.2e-15 m²)."""
+        strength = own.strength
         if not self.confidence:
+            others = f"; the diagnosis named {' + '.join(self.others)}" if self.others else ""
+            if self.confounded:
+                which = "" if self.confounded == self.others else f"; {' + '.join(self.confounded)}"
+                pair = "the two" if len(self.confounded) == 1 else "them"
+                others += f"{which} in its place: these recordings cannot tell {pair} apart"
             said = "unexplained" if self.unexplained else "not named"
             if not self.candidate:
                 fitted = "no candidate in these recordings"
@@ -73,7 +105,10 @@ class Trial:
             what = "; ".join(part for part in (fitted, base) if part)
             return f"{said} ({what}){others}" if what else f"{said}{others}"
         found = bounded(self.found, self.interval, ".3g", misses_data=self.unexplained)
-        size = "" if self.added is None else f"; {number(self.found - native, '.3g')} over the recordings' own"
+        size = ""
+        if self.added is not None:
+            beyond = own.beyond(self.found)
+            size = f"; {'no more than' if beyond is None else number(beyond, '.3g') + ' over'} the recordings' own"
         beside = f"; beside it {' + '.join(self.others)}" if self.others else ""
         return f"named ({self.confidence}), {strength} {found}{size}{beside}"
 
@@ -128,9 +163,8 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
     trials = [_trial(0.0, None, 0.0, as_recorded, inject.term, strength)]
     prepared = prepare(settings, quiet)
     base_fit = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
-    native = native_strength(prepared, inject.term, strength, settings.optim.physics_fit.iterations, base_fit)
-    own = f"{strength} {native:.3g}, the recordings' own (0 where not physical)"
-    progress(f"  as recorded: {trials[0].verdict(strength, native)}; a size found is read over {own}")
+    own = native_strength(prepared, inject.term, settings.optim.physics_fit.iterations, base_fit)
+    progress(f"  as recorded: {trials[0].verdict(own)}; a size found is read over {own.words()}")
     for i, size in enumerate(sorted(inject.sizes), start=1):
         params = inject.scaled(size)
         folder = output_dir / f"size-{size:g}"
@@ -138,10 +172,10 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
         data = replace(settings.data, path=str(folder / "recordings"))
         outcome = run(replace(settings, data=data), folder / "run", quiet)
         trials.append(_trial(size, params[strength], peak, outcome, inject.term, strength))
-        verdict = trials[-1].verdict(strength, native)
+        verdict = trials[-1].verdict(own)
         added = f"{strength} {params[strength]:.3g} added (peak {peak:.1f}× the noise)"
         progress(f"  [{i}/{len(inject.sizes)}] {added}: {verdict}")
-    section = detection_section(inject.term, strength, trials, native, settings.diagnosis.terms)
+    section = detection_section(inject.term, trials, own, settings.diagnosis.terms)
     with (output_dir / "as-recorded" / "report.md").open("a") as report:
         report.write("\n" + "\n".join(section) + "\n")
     progress("\n".join(section[-1:]))
@@ -163,8 +197,8 @@ def detection_limits(
     terms = candidate_settings(prepared, settings)[0].terms
     found, native = {}, {}
     for i, term in enumerate(terms, start=1):
-        strength = next(iter(VOCABULARY[term].PARAMS))
-        native[term] = native_strength(prepared, term, strength, settings.optim.physics_fit.iterations, base_fit)
+        native[term] = native_strength(prepared, term, settings.optim.physics_fit.iterations, base_fit)
+        strength = native[term].strength
         found[term] = []
         for peak, params in _ladder(prepared, term, base_fit):
             folder = output_dir / f"{term}-peak-{peak:g}"
@@ -174,7 +208,7 @@ def detection_limits(
             found[term].append(_trial(params[strength], params[strength], shown, outcome, term, strength))
             progress(
                 f"  [{i}/{len(terms)}] {term}: {strength} {params[strength]:.3g} (peak {shown:.1f}× the noise): "
-                f"{found[term][-1].verdict(strength, native[term])}"
+                f"{found[term][-1].verdict(native[term])}"
             )
             if found[term][-1].confidence:
                 break
@@ -218,7 +252,7 @@ def _ladder(prepared: Prepared, term: str, base_fit: PhysicsFit) -> list[tuple[f
     return ladder
 
 
-def limits_section(found: dict[str, list[Trial]], native: dict[str, float]) -> list[str]:
+def limits_section(found: dict[str, list[Trial]], native: dict[str, Own]) -> list[str]:
     """report.md's section of ``detection_limits``: each term's smallest size named, or the largest tried (a
     size found is read against the term's ``native`` strength, as ``detection`` reads it)."""
     lines = [
@@ -240,7 +274,7 @@ def limits_section(found: dict[str, list[Trial]], native: dict[str, float]) -> l
         missed = [t for t in trials if not t.confidence]
         last = "–"
         if missed:
-            verdict = missed[-1].verdict(strength, native[term])
+            verdict = missed[-1].verdict(native[term])
             last = f"{strength} {missed[-1].added:.3g} {unit} ({missed[-1].peak:.0f}×: {verdict})"
         if named is None:
             reach = f"{trials[-1].peak:.0f}" if trials else "–"
@@ -248,7 +282,7 @@ def limits_section(found: dict[str, list[Trial]], native: dict[str, float]) -> l
         else:
             lines.append(
                 f"| `{term}` | {strength} {named.added:.3g} {unit} | {named.peak:.1f} | "
-                f"{named.verdict(strength, native[term])} | {last} |"
+                f"{named.verdict(native[term])} | {last} |"
             )
     return lines
 
@@ -260,13 +294,28 @@ def _quiet(_: str) -> None:
 def _trial(size: float, added: float | None, peak: float, outcome: RunResult, term: str, strength: str) -> Trial:
     diagnosis, candidate = outcome.diagnosis, term in outcome.candidates
     unexplained, permeability = diagnosis["unexplained"], diagnosis["permeability"]["base"]
-    others = tuple(f"{e['term']} ({e['confidence']})" for e in diagnosis["left_out"] if e["term"] != term)
+    named = [e for e in diagnosis["left_out"] if e["term"] != term]
+    others = tuple(f"{e['term']} ({e['confidence']})" for e in named)
     entry = next((e for e in diagnosis["left_out"] if e["term"] == term), None)
     if entry is None:
         alone = (outcome.candidates.get(term) or {}).get(strength)
         why = tuple(note for note in diagnosis["notes"] if term in note)
+        rivals = {other for group in diagnosis["confounded"] if term in group["terms"] for other in group["terms"]}
+        confounded = tuple(f"{e['term']} ({e['confidence']})" for e in named if e["term"] in rivals)
         return Trial(
-            size, added, peak, "", None, [None, None], unexplained, candidate, alone, others, why, permeability
+            size,
+            added,
+            peak,
+            "",
+            None,
+            [None, None],
+            unexplained,
+            candidate,
+            alone,
+            others,
+            confounded=confounded,
+            why=why,
+            permeability=permeability,
         )
     value, interval = entry["params"][strength], entry["param_interval"][strength]
     return Trial(size, added, peak, entry["confidence"], value, interval, unexplained, candidate, others=others)
@@ -285,24 +334,25 @@ def no_candidate(term: str, trials: list[Trial], listed: list[str]) -> str | Non
     return f"{term} was no candidate in these recordings ({reason}): they cannot show it at any size"
 
 
-def native_strength(prepared: Prepared, term: str, strength: str, iterations: int, base_fit: PhysicsFit) -> float:
-    """The term's strength the recordings fit as they are, named or not (0 where its fit fails or is not
-    physical): what a size found is read against. Recordings hold some of any term's shape already (below
-    the naming threshold, or a model error it projects onto), and an added size adds to that. Fitted from
-    the starts the diagnosis gives it (``base_fit``: the base model fitted to the training samples)."""
+def native_strength(prepared: Prepared, term: str, iterations: int, base_fit: PhysicsFit) -> Own:
+    """The term's strength the recordings fit as they are, named or not: what a size found is read against.
+    Fitted from the starts the diagnosis gives it (``base_fit``: the base model fitted to the training
+    samples)."""
+    strength, parameter = next(iter(VOCABULARY[term].PARAMS.items()))
     samples, train = prepared.samples, prepared.split.train
     try:
         fit = fit_with_starts(prepared.make_model, (term,), samples, train, iterations, base_fit)
     except FitError:
-        return 0.0
-    return fit.params[term][strength] if fit.physical else 0.0
+        return Own(strength, parameter.absent, parameter.absent)
+    return Own(strength, fit.params[term][strength] if fit.physical else parameter.absent, parameter.absent)
 
 
-def detection_section(term: str, strength: str, trials: list[Trial], native: float, listed: list[str]) -> list[str]:
-    """report.md's section: each size added, the verdict (the size found over the recordings' own
-    ``native`` strength), what the diagnosis said of the term where it was added and not named (the rule that
+def detection_section(term: str, trials: list[Trial], own: Own, listed: list[str]) -> list[str]:
+    """report.md's section: each size added, the verdict (the size found over the recordings' ``own``
+    strength), what the diagnosis said of the term where it was added and not named (the rule that
     left it out, in its own words), and the smallest size named (``listed``: ``diagnosis.terms``, for why none
     could be)."""
+    strength = own.strength
     lines = [
         "## What these recordings could have shown",
         "",
@@ -314,7 +364,7 @@ def detection_section(term: str, strength: str, trials: list[Trial], native: flo
     ]
     for trial in trials:
         added = "as recorded" if trial.added is None else f"{trial.added:.3g}"
-        lines.append(f"| {added} | {trial.peak:.1f} | {trial.verdict(strength, native)} |")
+        lines.append(f"| {added} | {trial.peak:.1f} | {trial.verdict(own)} |")
     unnamed = [t for t in trials[1:] if t.why]
     if unnamed:
         lines += ["", f"Where `{term}` was added and not named, what the diagnosis said of it:"]
