@@ -112,7 +112,13 @@ def test_a_size_found_of_a_term_that_vanishes_as_its_strength_grows_adds_in_its_
     assert named.verdict(own).endswith(f"; {1 / (1 / 1.03e4 - 1 / 2.05e6):.3g} over the recordings' own")
     assert own.beyond(3e6) is None and Own("M", math.inf, math.inf).beyond(1e4) == pytest.approx(1e4)
     weaker = Trial(1.0, 1.07e4, 64.7, "weak", 3e6, [2e6, 4e6], False, True)
-    assert weaker.verdict(own).endswith("; no more than the recordings' own")
+    assert weaker.verdict(own).endswith(
+        "; the recordings as they are fit M 2.05e+06: the size found is not read over it"
+    )
+    # Bench-set p04 with g 0.064 of solid_relaxation added: found 0.058 (tau 0.1 s), read as "-1.76 over the
+    # recordings' own", the g 1.8 they fit as they are at tau 2.9 s: another shape of the term.
+    relaxation = Trial(64.0, 0.0643, 64.0, "weak", 0.0582, [0.0513, 0.0662], False, True)
+    assert relaxation.verdict(Own("g", 1.82)).endswith("fit g 1.82: the size found is not read over it")
     assert Own("M", math.inf, math.inf).words().startswith("M none, the recordings' own")
 
 
