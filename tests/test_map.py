@@ -56,6 +56,29 @@ def serial_map(generated_map, coarse_cache, tmp_path_factory):
     return result, output
 
 
+def test_a_spot_with_too_short_baselines_measures_its_noise_on_the_base_model_s_residual(tmp_path, coarse_cache):
+    # A spot of AR(1) noise (ρ₁ 0.9, σ 0.3 nN) with 36 samples before contact, nothing concealed. Its baselines
+    # cannot give the correlation at 50-sample blocks (3 × 36 samples of white noise read κ² from 1 to 44), and
+    # second differences read σ 3.8× low: the spot's diagnosis said σ 0.077 nN. Measured on the base model's
+    # residual in contact (a polynomial per curve removed, as the twin's would be), σ and κ² are the noise's.
+    from ptwin.data.noise import ar1_inflation
+    from ptwin.pipeline.run import BASE_RESIDUAL
+
+    folder = tmp_path / "map"
+    synth(
+        ["--map", "1", "1", "--out", str(folder), "--truth", str(tmp_path / "truth.csv"), "--speeds", *SPEEDS]
+        + ["--samples", "1000", "--noise-correlation", "0.9", "--seed", "5"]
+    )
+    result = run_map(map_settings(folder, coarse_cache, "map.scheduler=serial"), tmp_path / "out", lambda _: None)
+    row = result.table.iloc[0]
+    assert row["status"] == "ok" and not row["left_out"] and not row["unexplained"]
+    noise = json.loads((tmp_path / "out" / "spots" / "spot_000_000.json").read_text())["diagnosis"]["noise"]
+    assert noise["source"] == BASE_RESIDUAL
+    # an AR(1) of 19-sample memory over 3 × 950 samples fixes σ to about 10% (0.79–1.16 of it on 6 other spots)
+    assert noise["std"] == pytest.approx(3e-10, rel=0.25)
+    assert noise["inflation"] == pytest.approx(ar1_inflation(0.9, 50), rel=0.5)
+
+
 def test_synthetic_map_has_positions_and_its_truth_beside_it(generated_map):
     folder, truth = generated_map
     assert len(truth) == 16 and truth["in_region"].sum() == 4

@@ -9,15 +9,19 @@ from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.noise import (
     BASELINE,
     SECOND_DIFFERENCES,
+    SHORT_BASELINES,
     ar1_inflation,
     baseline_noise,
     block_inflation,
+    corrected,
     curve_noise,
     detrended_lag_sums,
     level_settled,
     model_inflation,
     pooled,
     settled,
+    trend_basis,
+    with_std,
 )
 from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.synth.simulator import Experiment, correlated_noise, simulate
@@ -41,16 +45,38 @@ def detrended(values):
     return values - np.polyval(np.polyfit(index, values, 1), index)
 
 
-def test_the_expected_autocorrelation_of_a_detrended_record_is_what_records_show():
+@pytest.mark.parametrize("degree", [1, 6])
+def test_the_expected_autocorrelation_of_a_detrended_record_is_what_records_show(degree):
     # Closed form (diagonal sums of M·T·M) against 4000 simulated 60-sample records of AR(1) noise, φ = 0.9:
-    # removing a line takes most of the correlation out of a record this short, and the formula says how much.
+    # removing a line (or a polynomial of degree 6: the residual in contact of a map's spot) takes most of the
+    # correlation out of a record this short, and the formula says how much.
     rng = np.random.default_rng(3)
-    records = [detrended(correlated_noise(rng, 60, 1.0, 0.9)) for _ in range(4000)]
+    basis = trend_basis(60, degree)
+    records = [(r := correlated_noise(rng, 60, 1.0, 0.9)) - basis @ (basis.T @ r) for _ in range(4000)]
     simulated = [np.mean([np.sum(r[: 60 - k] * r[k:]) for r in records]) for k in range(6)]
-    expected = detrended_lag_sums(60, 0.9, 5)
+    expected = detrended_lag_sums(60, 0.9, 5, degree)
     assert expected == pytest.approx(simulated, rel=0.06, abs=0.3)
     assert expected[0] < 0.8 * 60  # the naive expectation (60·φ^0) is far off
-    assert detrended_lag_sums(60, 0.0, 0)[0] == pytest.approx(58.0)  # white: n − 2, the line's two parameters
+    # white: n less the polynomial's parameters
+    assert detrended_lag_sums(60, 0.0, 0, degree)[0] == pytest.approx(60.0 - degree - 1)
+    if degree == 1:  # the line of a baseline in z, removed by least squares, is the same projection
+        assert records[0] == pytest.approx(detrended(records[0] + basis @ np.ones(2)), abs=1e-12)
+
+
+def test_a_std_read_off_second_differences_is_corrected_for_the_sets_correlation():
+    # AR(1) noise of ρ₁ 0.9 with no baseline to measure it on (a map's spot: 36 samples before contact): second
+    # differences read σ 3.8× low; every residual was then 3.8 σ, and the diagnosis's statistics 14× too large.
+    time = np.linspace(0, 1, 4000)
+    force = 5e-7 * time**1.5 + ar1(0.9, 4000, 3e-10)
+    raw = curve_noise(time, time - 0.01, force, time < 0.01, block=50)
+    assert raw.std == pytest.approx(3e-10 / 3.8, rel=0.15)
+    correlation = replace(raw, share=1.0, memory=0.9, source=BASELINE)
+    assert corrected(raw, correlation).std == pytest.approx(3e-10, rel=0.1)
+    # a correlation read off short baselines alone corrects nothing: too uncertain for it
+    assert corrected(raw, replace(correlation, source=SHORT_BASELINES)).std == raw.std
+    assert corrected(corrected(raw, correlation), correlation).std == corrected(raw, correlation).std  # once
+    given = with_std(raw, 3e-10, "noise_std of meta.yaml")  # a lab's σ is not read off differences
+    assert corrected(given, correlation).std == 3e-10
 
 
 def test_short_baselines_together_give_the_inflation_their_records_alone_would_underestimate():

@@ -50,13 +50,15 @@ def test_noise_measured_on_the_residual_keeps_the_samples_as_fitted(tmp_path, co
     # A baseline too short for the noise's correlation: it is measured on the twin's residual and the samples are
     # rebuilt with it. They must be the fitted ones: of the reference only its hold (its approach is the law), not
     # the curve as recorded (641 approach samples came back in contact when they were rebuilt from it).
-    from ptwin.data.noise import rests_on_short_records
+    from ptwin.data.noise import RESIDUAL, rests_on_short_records
+    from ptwin.pipeline.prepare import fitted_samples
     from ptwin.pipeline.run import _residual_noise
 
     truth, settings, prepared = _prepared_relaxation_hold(tmp_path, coarse_cache, z_start=-0.02e-6)
     assert rests_on_short_records(prepared.noise)
     twin = prepared.make_model.twin(truth.permeability, 1e-9, prepared.samples, prepared.split.train)
-    rebuilt = _residual_noise(prepared, twin, settings.diagnosis.block).samples
+    noise = _residual_noise(prepared, twin.predict, settings.diagnosis.block, 1, RESIDUAL)
+    rebuilt, _ = fitted_samples(prepared.fitted, noise, "cpu")
     assert rebuilt.noise_inflation != prepared.samples.noise_inflation
     assert torch.equal(rebuilt.in_contact, prepared.samples.in_contact)
     assert torch.equal(rebuilt.pins_contact, prepared.samples.pins_contact)

@@ -74,10 +74,13 @@ class NoiseModel:
     record: np.ndarray | None = field(default=None, compare=False, repr=False)  # the detrended baseline [N]
     short: np.ndarray | None = field(default=None, compare=False, repr=False)  # a baseline too short for a model
     unsettled: int = 0  # samples at the start of the baselines left out: not settled (``settled``, ``level_settled``)
+    # σ read off second differences as if the noise were white [N], where ``std`` is it corrected for the set's
+    # correlation (``corrected``); None where σ was measured otherwise
+    differences: float | None = None
 
     def as_dict(self) -> dict:
         """Every number of the model (results.json), without the baseline record."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("record", "short")}
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("record", "short", "differences")}
 
     def autocorrelation(self, lags: np.ndarray) -> np.ndarray:
         """ρ_k of the model at ``lags`` (ρ₀ = 1)."""
@@ -128,16 +131,21 @@ def _lagged(a: np.ndarray, b: np.ndarray, lags: int) -> np.ndarray:
     return np.fft.irfft(product, size, axis=0)[: lags + 1]
 
 
-def detrended_lag_sums(length: int, memory, lags: int) -> np.ndarray:
+def trend_basis(length: int, degree: int = 1) -> np.ndarray:
+    """An orthonormal basis (length, degree + 1) of the polynomials of ``degree`` over a record's samples."""
+    q, _ = np.linalg.qr(np.polynomial.legendre.legvander(np.linspace(-1.0, 1.0, length), degree))
+    return q
+
+
+def detrended_lag_sums(length: int, memory, lags: int, degree: int = 1) -> np.ndarray:
     """E[Σ_t e_t e_{t+k}], k = 0 … ``lags``, for unit-variance AR(1) noise of memory φ (0: white; one φ or
-    an array of them, a row each) after a least-squares line is removed from a record of ``length``
-    samples: the diagonal sums of M·T·M, M = I − QQᵀ, in O(length · log length) per φ."""
+    an array of them, a row each) after a least-squares polynomial of ``degree`` (1: a line) is removed from a
+    record of ``length`` samples: the diagonal sums of M·T·M, M = I − QQᵀ, in O(length · log length) per φ."""
     memories = np.atleast_1d(np.asarray(memory, dtype=np.float64))
-    index = np.arange(length, dtype=np.float64)
-    q, _ = np.linalg.qr(np.column_stack([np.ones(length), index - index.mean()]))
+    q = trend_basis(length, degree)
     k = np.arange(lags + 1)
     raw = (length - k)[None, :] * memories[:, None] ** k[None, :]  # 0⁰ = 1: white noise's n at lag 0
-    tq = np.stack([_apply_ar(q, m) for m in memories], axis=2)  # (length, 2, memories)
+    tq = np.stack([_apply_ar(q, m) for m in memories], axis=2)  # (length, degree + 1, memories)
     qcore = np.einsum("ti,ijm->tjm", q, np.einsum("ti,tjm->ijm", q, tq))  # Q·(Qᵀ·T·Q) for every φ
     qq = q[:, :, None]
     sums = raw - (_lagged(qq, tq, lags) + _lagged(tq, qq, lags) - _lagged(qcore, qq, lags)).sum(axis=1).T
@@ -145,19 +153,19 @@ def detrended_lag_sums(length: int, memory, lags: int) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=256)
-def _detrended_grid(length: int, lags: int) -> tuple[np.ndarray, np.ndarray]:
+def _detrended_grid(length: int, lags: int, degree: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """``detrended_lag_sums`` of white noise, (lags + 1,), and at every memory of the grid, (memories,
     lags + 1): baselines of one length share them (a map's spots, a set's curves)."""
-    sums = detrended_lag_sums(length, np.concatenate([[0.0], _MEMORIES]), lags)
+    sums = detrended_lag_sums(length, np.concatenate([[0.0], _MEMORIES]), lags, degree)
     return sums[0], sums[1:]
 
 
-def fit_correlation(records: list[np.ndarray], lags: int) -> tuple[float, float, float]:
-    """(c, φ, σ) of white + AR(1) noise fitted to the pooled sample autocorrelation of detrended
-    ``records`` at lags 1 … ``lags``, against its expectation for records of those lengths (so the
-    detrending's bias is modelled, not ignored); σ is unbiased under the fitted model."""
+def fit_correlation(records: list[np.ndarray], lags: int, degree: int = 1) -> tuple[float, float, float]:
+    """(c, φ, σ) of white + AR(1) noise fitted to the pooled sample autocorrelation of ``records`` (each with a
+    polynomial of ``degree`` removed, 1: a line) at lags 1 … ``lags``, against its expectation for records of
+    those lengths (so the detrending's bias is modelled, not ignored); σ is unbiased under the fitted model."""
     observed = sum(_lagged(r, r, lags) for r in records)
-    grids = [_detrended_grid(r.size, lags) for r in records]
+    grids = [_detrended_grid(r.size, lags, degree) for r in records]
     white = sum(g[0] for g in grids)
     ar = sum(g[1] for g in grids)  # (memories, lags + 1)
     shares = _SHARES[:, None, None]
@@ -171,8 +179,8 @@ def _lags(records: list[np.ndarray], block: int) -> int:
     return int(max(2, min(block, min(r.size for r in records) // 3)))
 
 
-def _from_records(records: list[np.ndarray], block: int, step: float, source: str) -> NoiseModel:
-    share, memory, std = fit_correlation(records, _lags(records, block))
+def _from_records(records: list[np.ndarray], block: int, step: float, source: str, degree: int = 1) -> NoiseModel:
+    share, memory, std = fit_correlation(records, _lags(records, block), degree)
     measured = [m for m in (block_inflation(r, block) for r in records) if m is not None]
     inflation = max(1.0, model_inflation(share, memory, block), float(np.median(measured)) if measured else 1.0)
     total = sum(r.size for r in records)
@@ -257,16 +265,21 @@ def rests_on_short_records(noise: NoiseModel) -> bool:
     return SHORT_BASELINES in noise.source or noise.source == SECOND_DIFFERENCES
 
 
-def residual_noise(records: list[np.ndarray], std: float, step: float, block: int) -> NoiseModel | None:
+def residual_noise(
+    records: list[np.ndarray], std: float, step: float, block: int, degree: int = 1, source: str = RESIDUAL
+) -> NoiseModel | None:
     """The noise's correlation measured on a flexible model's residual where the baselines cannot give it
-    (``rests_on_short_records``): each curve's residual in contact, a line in time removed, fitted as the
-    baselines are (white + AR(1), the detrending's bias modelled); σ stays ``std`` (the baselines' or the
-    lab's). A model that misses some structure leaves it in the records and raises κ²: the tests it feeds
-    then err towards calling structure noise. None where no record holds ``MIN_BASELINE`` samples."""
-    detrended = [_detrended(np.arange(r.size, dtype=np.float64), r) for r in records if r.size >= MIN_BASELINE]
-    if not detrended:
+    (``rests_on_short_records``): each curve's residual in contact, a polynomial in time of ``degree`` removed
+    (1: a line), fitted as the baselines are (white + AR(1), the detrending's bias modelled); σ stays ``std``
+    (the baselines' or the lab's); ``source`` says which model's residual. A model that misses some structure
+    leaves it in the records and raises κ²: the tests it feeds then err towards calling structure noise. None
+    where no record holds ``MIN_BASELINE`` samples."""
+    kept = [r for r in records if r.size >= MIN_BASELINE]
+    if not kept:
         return None
-    return replace(_from_records(detrended, block, step, RESIDUAL), std=std, record=None)
+    bases = [trend_basis(r.size, degree) for r in kept]
+    detrended = [r - q @ (q.T @ r) for r, q in zip(kept, bases)]
+    return replace(_from_records(detrended, block, step, source, degree), std=std, record=None)
 
 
 def _detrended(z: np.ndarray, force: np.ndarray) -> np.ndarray:
@@ -294,19 +307,31 @@ def curve_noise(time, z, force, baseline: np.ndarray, block: int) -> NoiseModel:
     if measured is not None:
         return measured
     short = _detrended(z[baseline], force[baseline]) if baseline.sum() >= MIN_RECORD else None
-    return NoiseModel(second_difference_std(force), 0.0, 1.0, 0.0, SECOND_DIFFERENCES, int(force.size), short=short)
+    std = second_difference_std(force)
+    return NoiseModel(std, 0.0, 1.0, 0.0, SECOND_DIFFERENCES, int(force.size), short=short, differences=std)
 
 
 def with_std(model: NoiseModel, std: float, where: str) -> NoiseModel:
     """``model`` with σ given elsewhere (``where``); the correlation stays what was measured."""
-    return replace(model, std=std, source=f"std from {where}; correlation from the {model.source}")
+    return replace(model, std=std, source=f"std from {where}; correlation from the {model.source}", differences=None)
+
+
+def corrected(curve: NoiseModel, correlation: NoiseModel) -> NoiseModel:
+    """``curve`` with a σ read off second differences corrected for ``correlation``'s: Var(Δ²e) = σ²(6 − 8ρ₁ +
+    2ρ₂), so correlated noise reads low there (AR(1) of ρ₁ 0.9: by 3.8×); other curves as they are. Not where
+    the correlation rests on short baselines alone (``rests_on_short_records``): 3 × 36 samples of that noise
+    gave corrected σ from 0.43 to 5.9 times the truth."""
+    if curve.differences is None or rests_on_short_records(correlation):
+        return curve
+    rho1, rho2 = correlation.autocorrelation(np.array([1, 2]))
+    return replace(curve, std=curve.differences * math.sqrt(6.0 / (6.0 - 8.0 * rho1 + 2.0 * rho2)))
 
 
 def pooled(models: list[NoiseModel], weights: list[float], steps: list[float], block: int = 50) -> NoiseModel:
     """The set's noise: σ averaged with ``weights`` (fitted samples per curve); the correlation fitted on
     every measured baseline at once (one instrument, one sample), short ones too where no curve has a long
-    one, else white. A curve whose σ came from second differences has it corrected for that correlation:
-    Var(Δ²e) = σ²(6 − 8ρ₁ + 2ρ₂)."""
+    one, else white. A curve whose σ came from second differences has it corrected for that correlation
+    (``corrected``)."""
     records = [m.record for m in models if m.record is not None]
     source = models[0].source
     if not records:
@@ -315,9 +340,7 @@ def pooled(models: list[NoiseModel], weights: list[float], steps: list[float], b
         std = float(np.average([m.std for m in models], weights=weights))
         return NoiseModel(std, 0.0, 1.0, 0.0, SECOND_DIFFERENCES, sum(m.samples for m in models))
     correlation = _from_records(records, block, float(np.median(steps)), source)
-    rho1, rho2 = correlation.autocorrelation(np.array([1, 2]))
-    factor = math.sqrt(6.0 / (6.0 - 8.0 * rho1 + 2.0 * rho2))
-    stds = [m.std * factor if m.source == SECOND_DIFFERENCES else m.std for m in models]
+    stds = [corrected(m, correlation).std for m in models]
     sources = {m.source for m in models if m.record is not None}
     if not sources:  # short records only: say so, and where σ came from if not from them
         given = {m.source.split(";")[0] for m in models if m.source.startswith("std from")}

@@ -13,7 +13,7 @@ import torch
 
 from ptwin.data.evidence import SPOT_VARIATION, RateEffect, drag_from_baselines, rate_effect, spot_variation
 from ptwin.data.kinematics import CurveKinematics, curve_kinematics
-from ptwin.data.noise import NoiseModel, pooled
+from ptwin.data.noise import NoiseModel, corrected, pooled
 from ptwin.data.recordings import APPROACH, Meta, RecordingError, RecordingSet, load_recordings
 from ptwin.data.relaxation import Relaxation, relaxations
 from ptwin.fitting.hybrid import ErrorNetwork, HybridTwin
@@ -121,19 +121,20 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     recordings = load_recordings(settings.data.path)
     meta = recordings.meta
     curves = curve_kinematics(recordings, settings.data.smoothing, settings.diagnosis.block)
-    _print_kinematics(curves, progress)
-    reference = next(c for c in curves if c.curve == meta.reference_curve)
-    law = ReferenceCurve(reference, settings.model.elastic_nodes, settings.model.elastic_smoothing)
-    fitted, notes = _fitted_curves(recordings, curves, reference, law)
-    notes += [_unsettled_note(c) for c in curves if c.noise.unsettled]
     noise = pooled(
         [c.noise for c in curves],
         [max(int(c.in_contact.sum()), 1) for c in curves],
         _steps(curves),
         settings.diagnosis.block,
     )
-    noise = replace(noise, std=float(np.average([c.noise.std for c in fitted], weights=_counts(fitted))))
-    samples = Samples.from_curves(fitted, noise.inflation).to(settings.device)
+    # σ read off second differences, corrected for the set's correlation before the law inherits the reference's
+    curves = [replace(c, noise=corrected(c.noise, noise)) for c in curves]
+    _print_kinematics(curves, progress)
+    reference = next(c for c in curves if c.curve == meta.reference_curve)
+    law = ReferenceCurve(reference, settings.model.elastic_nodes, settings.model.elastic_smoothing)
+    fitted, notes = _fitted_curves(recordings, curves, reference, law)
+    notes += [_unsettled_note(c) for c in curves if c.noise.unsettled]
+    samples, noise = fitted_samples(fitted, noise, settings.device)
     basis = cached_basis(settings.pgd, settings.cache_dir, progress)
     s = settings.split
     split = split_samples(samples, tuple(s.fractions), s.mode, s.held_out_curve, settings.seed)
@@ -231,6 +232,13 @@ def _unsettled_note(curve: CurveKinematics) -> str:
 def _spot_note(curves) -> str | None:
     variation = spot_variation(curves)
     return variation.sentence() if variation is not None and variation.spread > SPOT_VARIATION else None
+
+
+def fitted_samples(fitted: list[CurveKinematics], noise: NoiseModel, device: str) -> tuple[Samples, NoiseModel]:
+    """The ``fitted`` curves' samples under the set's ``noise`` (its κ²), and that noise with σ the curves' mean
+    over their fitted samples."""
+    noise = replace(noise, std=float(np.average([c.noise.std for c in fitted], weights=_counts(fitted))))
+    return Samples.from_curves(fitted, noise.inflation).to(device), noise
 
 
 def _counts(curves) -> list[int]:
