@@ -346,12 +346,13 @@ def native_strength(prepared: Prepared, term: str, iterations: int, base_fit: Ph
     Fitted from the starts the diagnosis gives it (``base_fit``: the base model fitted to the training
     samples)."""
     strength, parameter = next(iter(VOCABULARY[term].PARAMS.items()))
+    absent = 0.0 if parameter.absent is None else parameter.absent  # a strength no one value removes: read from 0
     samples, train = prepared.samples, prepared.split.train
     try:
         fit = fit_with_starts(prepared.make_model, (term,), samples, train, iterations, base_fit)
     except FitError:
-        return Own(strength, parameter.absent, parameter.absent)
-    return Own(strength, fit.params[term][strength] if fit.physical else parameter.absent, parameter.absent)
+        return Own(strength, absent, absent)
+    return Own(strength, fit.params[term][strength] if fit.physical else absent, absent)
 
 
 def detection_section(term: str, trials: list[Trial], own: Own, listed: list[str]) -> list[str]:
