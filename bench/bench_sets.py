@@ -91,16 +91,24 @@ def diagnose_set(folder: Path, overrides: list[str], scratch: Path) -> tuple[dic
     return diagnosis, time.perf_counter() - started
 
 
-def run_sets(overrides: list[str], scratch: Path, only: list[str] | None = None) -> list[Graded] | None:
-    """Every set graded (None when the sets are not there), a line printed as each finishes."""
+def shared_sets(only: list[str] | None) -> list[tuple[Path, dict]] | None:
+    """(folder, truth) of every shared set whose name holds one of ``only`` (all without it); None, with a line
+    saying so, when the sets are not there."""
     if not SETS.is_dir():
         print(f"bench-sets: {SETS} not found (set PTWIN_BENCH_SETS to the folder of the shared sets); skipped")
         return None
+    folders = sorted(p for p in SETS.iterdir() if (p / "truth.yaml").is_file())
+    chosen = [f for f in folders if not only or any(word in f.name for word in only)]
+    return [(folder, yaml.safe_load((folder / "truth.yaml").read_text())) for folder in chosen]
+
+
+def run_sets(overrides: list[str], scratch: Path, only: list[str] | None = None) -> list[Graded] | None:
+    """Every set graded (None when the sets are not there), a line printed as each finishes."""
+    sets = shared_sets(only)
+    if sets is None:
+        return None
     rows = []
-    for folder in sorted(p for p in SETS.iterdir() if (p / "truth.yaml").is_file()):
-        if only and not any(word in folder.name for word in only):
-            continue
-        truth = yaml.safe_load((folder / "truth.yaml").read_text())
+    for folder, truth in sets:
         d, seconds = diagnose_set(folder, overrides, scratch)
         rows.append(graded(folder.name, truth, d, seconds))
         print(f"bench-sets: {rows[-1].line()}")
@@ -144,14 +152,11 @@ def perturbed(frame: pd.DataFrame, meta: dict):
 
 def run_perturbed(overrides: list[str], scratch: Path, only: list[str] | None = None) -> list[Graded] | None:
     """Every set, perturbed each way of ``perturbed``, graded against its truth."""
-    if not SETS.is_dir():
-        print(f"bench-sets: {SETS} not found (set PTWIN_BENCH_SETS to the folder of the shared sets); skipped")
+    sets = shared_sets(only)
+    if sets is None:
         return None
     rows = []
-    for folder in sorted(p for p in SETS.iterdir() if (p / "truth.yaml").is_file()):
-        if only and not any(word in folder.name for word in only):
-            continue
-        truth = yaml.safe_load((folder / "truth.yaml").read_text())
+    for folder, truth in sets:
         meta = yaml.safe_load((folder / "data" / "meta.yaml").read_text())
         for how, frame in perturbed(pd.read_csv(folder / "data" / "curves.csv"), meta):
             target = scratch / f"{folder.name}-{how.replace(' ', '-')}"  # a Hydra override's value: no commas
