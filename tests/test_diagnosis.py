@@ -187,12 +187,27 @@ class HeldOutFails:
 HELD_OUT_FAILS = HeldOutFails()
 
 
+def ten_samples():
+    """Ten samples in contact of σ 1, force 0, split 5/3/2: what ``fit_candidates`` reads of a set."""
+    import torch
+
+    samples = type(
+        "Samples",
+        (),
+        {
+            "force": torch.zeros(10),
+            "in_contact": torch.ones(10, dtype=torch.bool),
+            "pins_contact": torch.zeros(10, dtype=torch.bool),
+            "noise_floor": torch.ones(10),
+        },
+    )()
+    return samples, Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
+
+
 @pytest.mark.parametrize(("max_terms", "pair_whiteness", "largest"), [(3, 50.0, 3), (3, 2.0, 2), (1, 50.0, 1)])
 def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_structure(
     monkeypatch, max_terms, pair_whiteness, largest
 ):
-    import torch
-
     import ptwin.diagnosis.name as name
 
     fitted, starts = [], []
@@ -207,17 +222,7 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     whiteness = {0: 50.0, 1: 50.0, 2: pair_whiteness, 3: 1.0}  # by subset size
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
-    samples = type(
-        "Samples",
-        (),
-        {
-            "force": torch.zeros(10),
-            "in_contact": torch.ones(10, dtype=torch.bool),
-            "pins_contact": torch.zeros(10, dtype=torch.bool),
-            "noise_floor": torch.ones(10),
-        },
-    )()
-    split = Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
+    samples, split = ten_samples()
     name.fit_candidates(None, samples, split, ["a", "b", "c"], max_terms, 1, 50, ABOVE_FIVE, progress=lambda line: None)
     assert max(len(t) for t in fitted) == largest
     assert sum(len(t) == largest for t in fitted) == {1: 3, 2: 3, 3: 1}[largest]
@@ -231,8 +236,6 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
 ):
     """Every single term non-physical (a null set: each drifts off to a negative parameter) and the base
     model's residual white: nothing is left to explain, so no pair is fitted (they were, once: 21 fits)."""
-    import torch
-
     import ptwin.diagnosis.name as name
 
     fitted = []
@@ -248,17 +251,7 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
     whiteness = {0: base_whiteness, 1: 1.0, 2: 1.0}
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
-    samples = type(
-        "Samples",
-        (),
-        {
-            "force": torch.zeros(10),
-            "in_contact": torch.ones(10, dtype=torch.bool),
-            "pins_contact": torch.zeros(10, dtype=torch.bool),
-            "noise_floor": torch.ones(10),
-        },
-    )()
-    split = Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
+    samples, split = ten_samples()
     name.fit_candidates(None, samples, split, ["a", "b", "c"], 2, 1, 50, ABOVE_FIVE, progress=lambda line: None)
     assert max(len(t) for t in fitted) == largest
 
@@ -275,8 +268,6 @@ def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_te
     fitted, and only those; at 3 BIC better, as the other two are, it is not; nor where the term is beyond the
     noise in its own shape (it is named alone), nor where its fit ran K to 1e25 m² (a degenerate
     parametrisation, such as strain_dependent_permeability makes of one ramp-and-hold curve)."""
-    import torch
-
     import ptwin.diagnosis.name as name
     from ptwin.diagnosis.null import TermEvidence
 
@@ -297,17 +288,7 @@ def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_te
 
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: 2.0)
-    samples = type(
-        "Samples",
-        (),
-        {
-            "force": torch.zeros(10),
-            "in_contact": torch.ones(10, dtype=torch.bool),
-            "pins_contact": torch.zeros(10, dtype=torch.bool),
-            "noise_floor": torch.ones(10),
-        },
-    )()
-    split = Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
+    samples, split = ten_samples()
     name.fit_candidates(
         None, samples, split, ["a", "b", "c"], 2, 1, 50, ABOVE_FIVE, lambda line: None, None, bic_margin=10.0
     )
