@@ -115,8 +115,8 @@ def test_a_size_found_of_a_term_that_vanishes_as_its_strength_grows_adds_in_its_
     assert weaker.verdict(own).endswith(
         "; the recordings as they are fit M 2.05e+06: the size found is not read over it"
     )
-    # Bench-set p04 with g 0.064 of solid_relaxation added: found 0.058 (tau 0.1 s), read as "-1.76 over the
-    # recordings' own", the g 1.8 they fit as they are at tau 2.9 s: another shape of the term.
+    # Bench-set p04 with g 0.064 of solid_relaxation added: found 0.058 (tau 0.11 s), read as "-1.76 over the
+    # recordings' own", the g 1.8 they fit as they are at tau 542 s: another shape of the term.
     relaxation = Trial(64.0, 0.0643, 64.0, "weak", 0.0582, [0.0513, 0.0662], False, True)
     assert relaxation.verdict(Own("g", 1.82)).endswith("fit g 1.82: the size found is not read over it")
     assert Own("M", math.inf, math.inf).words().startswith("M none, the recordings' own")

@@ -54,8 +54,8 @@ class Own:
         """What a strength ``found`` adds to the recordings' own: the difference for a strength that acts from 0;
         for one whose term vanishes as it grows (a pore relaxation's M: its force is ∝ 1/M to first order), the
         strength whose 1/M is the difference of the two. None where ``found`` is no stronger than the own: the
-        recordings as they are fit the term in another shape (bench-set p04: g 1.8 at tau 2.9 s, against 0.058
-        at 0.1 s with g 0.064 added), and the added size is not read over that."""
+        recordings as they are fit the term in another shape (bench-set p04: g 1.8 at tau 542 s, against 0.058
+        at 0.11 s with g 0.064 added at 0.1 s), and the added size is not read over that."""
         if self.absent != math.inf:
             excess = found - self.value
             return excess if excess > 0 else None
