@@ -2,11 +2,13 @@
 
 import json
 import math
+import re
 
 import pytest
 
 from ptwin.diagnosis.locate import whiteness
 from ptwin.fitting.split import Split
+from tests.conftest import run, simulated_set
 
 
 def test_whiteness_is_one_for_noise_and_large_for_structure():
@@ -24,6 +26,18 @@ def test_clean_data_no_mismatch_no_term(clean_run):
     assert diagnosis["mismatch"]["detected"] is False
     assert diagnosis["left_out"] == [] and diagnosis["unexplained"] is False
     assert json.loads((output / "diagnosis.json").read_text()) == diagnosis
+
+
+def test_a_noise_std_the_twins_residual_says_may_read_low_is_said_with_its_bound(clean_run, tmp_path, coarse_cache):
+    # train.py keeps a σ read off second differences as it is (what the twin misses would correct it upwards), so
+    # where the twin's residual is correlated enough that σ may read far low, a note says by how much at most. AR(1)
+    # noise of ρ₁ 0.9 with short baselines reads 3.8× low there; white noise gets no note.
+    folder = simulated_set(tmp_path / "set", noise_correlation=0.9)
+    notes = run(folder, coarse_cache, tmp_path / "run").diagnosis["notes"]
+    said = [note for note in notes if "read off second differences" in note]
+    assert len(said) == 1 and said[0].startswith("The noise std of v0.5, v4, v20, v80 is read off second differences")
+    assert 3.0 < float(re.search(r"read ([0-9.]+)× low", said[0]).group(1)) < 6.0
+    assert not any("read off second differences" in note for note in clean_run[0].diagnosis["notes"])
 
 
 def test_concealed_viscosity_is_named_and_refitted(viscous_run):

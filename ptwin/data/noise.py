@@ -323,8 +323,13 @@ def corrected(curve: NoiseModel, correlation: NoiseModel) -> NoiseModel:
     gave corrected σ from 0.43 to 5.9 times the truth."""
     if curve.differences is None or rests_on_short_records(correlation):
         return curve
+    return replace(curve, std=curve.differences * difference_factor(correlation))
+
+
+def difference_factor(correlation: NoiseModel) -> float:
+    """How many times low a σ read off second differences is under ``correlation``: √(6 / (6 − 8ρ₁ + 2ρ₂))."""
     rho1, rho2 = correlation.autocorrelation(np.array([1, 2]))
-    return replace(curve, std=curve.differences * math.sqrt(6.0 / (6.0 - 8.0 * rho1 + 2.0 * rho2)))
+    return math.sqrt(6.0 / (6.0 - 8.0 * rho1 + 2.0 * rho2))
 
 
 def pooled(models: list[NoiseModel], weights: list[float], steps: list[float], block: int = 50) -> NoiseModel:
