@@ -149,6 +149,18 @@ def test_parameters_the_data_cannot_fix_are_not_identified_never_certain():
     torch.testing.assert_close(cov[2, 2], expected)
 
 
+def test_a_parameter_that_barely_acts_gets_an_infinite_variance_and_leaves_the_others_exact():
+    # A column of norm ~1e-156 (a pore term's K in its K → 0 limit on a real creep) squares to a denormal in JᵀJ:
+    # scaled by its reciprocal, the eigensolver was fed infinities and failed. Rescaling a parameter leaves the
+    # others' covariance as it is: the textbook's of the same model with that parameter at unit scale.
+    x = torch.linspace(0, 1, 50, dtype=torch.float64)
+    design = torch.stack([x, torch.ones_like(x), x**2], 1)
+    r = 0.01 * torch.sin(7 * x)
+    cov = covariance(design * torch.tensor([1.0, 1.0, 1e-160], dtype=torch.float64), r)
+    assert torch.isinf(cov[2, 2])
+    torch.testing.assert_close(cov[:2, :2], (r @ r) / 47 * torch.linalg.inv(design.T @ design)[:2, :2])
+
+
 def test_a_step_the_model_cannot_evaluate_is_rejected_not_fatal():
     # The model is defined for θ < 1 only (like a depth beyond the sample); the optimum is at 0.9.
     def residual(theta):

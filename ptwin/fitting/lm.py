@@ -243,21 +243,27 @@ def covariance(jacobian: torch.Tensor, residual: torch.Tensor, rcond: float = 1e
     Directions the data do not fix (eigenvalues of the Marquardt-scaled JᵀJ below ``rcond``
     of the largest) are not identified: every parameter taking part in one gets an infinite
     variance (and NaN covariances), never the zero a pseudo-inverse would give it.
+
+    The scaling divides J's columns by their norms before JᵀJ is formed: a parameter that barely acts (a pore
+    term's K in its K → 0 limit, a column of norm 1e-156 on a real creep) would put a denormal on JᵀJ's diagonal,
+    whose reciprocal overflows and fed an infinite matrix to the eigensolver, which failed. Its variance is what
+    the arithmetic gives, infinite where it overflows.
     """
     n, p = jacobian.shape
     variance = (residual @ residual) / max(n - p, 1)
-    normal = jacobian.T @ jacobian
-    scale = normal.diagonal().sqrt()
-    unknown = torch.full((p, p), float("nan"), dtype=normal.dtype, device=normal.device)
-    if not torch.isfinite(normal).all() or not torch.isfinite(variance):
+    unknown = torch.full((p, p), float("nan"), dtype=jacobian.dtype, device=jacobian.device)
+    if not torch.isfinite(jacobian).all() or not torch.isfinite(variance):
         return unknown
-    live = scale > 0
-    inverse_scale = torch.where(live, 1.0 / scale.where(live, torch.ones_like(scale)), torch.zeros_like(scale))
-    scaled = normal * torch.outer(inverse_scale, inverse_scale) + torch.diag((~live).to(normal.dtype))
+    scale = torch.linalg.vector_norm(jacobian, dim=0)
+    live = scale > torch.finfo(scale.dtype).tiny  # a norm whose reciprocal is finite
+    units = jacobian / scale.where(live, torch.ones_like(scale)) * live
+    scaled = units.T @ units + torch.diag((~live).to(jacobian.dtype))
     eigenvalues, vectors = torch.linalg.eigh(0.5 * (scaled + scaled.T))
     kept = eigenvalues > rcond * eigenvalues.max()
     inverse = (vectors[:, kept] / eigenvalues[kept]) @ vectors[:, kept].T
-    result = variance * inverse * torch.outer(inverse_scale, inverse_scale)
+    inverse_scale = torch.where(live, 1.0 / scale.where(live, torch.ones_like(scale)), torch.zeros_like(scale))
+    # one factor at a time: a product of the two reciprocals alone can overflow where the covariance is 0
+    result = variance * (inverse * inverse_scale[:, None]) * inverse_scale[None, :]
     unidentified = (vectors[:, ~kept].abs() > 1e-6).any(dim=1) | ~live
     result[unidentified, :] = float("nan")
     result[:, unidentified] = float("nan")
