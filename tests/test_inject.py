@@ -19,6 +19,7 @@ from ptwin.pipeline.inject import (
     detection,
     detection_limits,
     detection_section,
+    judged_peak,
 )
 from ptwin.pipeline.prepare import prepare
 from tests.conftest import CONFIGS, OPEN_DATA, needs_open_data, simulated_set
@@ -242,11 +243,27 @@ def test_each_terms_sizes_are_read_off_its_added_force_weak_to_strong(tmp_path, 
         strength = next(iter(ladder[0][1]))
         values = [params[strength] for _, params in ladder]
         for peak, params in ladder:
-            added = added_force(prepared, term, params, base)
-            shown = max(np.abs(force).max() for force in added.values()) / prepared.noise.std
-            assert shown == pytest.approx(peak, rel=0.15)
+            assert judged_peak(prepared, added_force(prepared, term, params, base)) == pytest.approx(peak, rel=0.15)
         assert values == sorted(values, reverse=term == "pore_pressure_relaxation")
         assert [p for p, _ in ladder] == list(LADDER[: len(ladder)])
+
+
+def test_the_peak_of_a_term_added_is_read_on_the_samples_the_diagnosis_judges(tmp_path, coarse_cache):
+    # On one ramp-and-hold curve the approach is the elastic law, no data: a viscosity's force, largest where the
+    # approach ends (1.06 nN) and gone within a few samples of the hold (0.79 nN at its first), counts on the hold.
+    from ptwin.data.recordings import write_recordings
+    from ptwin.fitting.physics_fit import fit_physics
+    from ptwin.synth.simulator import Experiment, Hold, simulate
+
+    experiment = Experiment(base_speeds=(), holds=(Hold(3e-6, 2.0, 10e-6),), z_start=-3e-6, sample_rate=2000.0)
+    write_recordings(tmp_path / "set", *simulate(experiment))
+    prepared = prepare(inject_settings(tmp_path / "set", coarse_cache), progress=lambda _: None)
+    base = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+    added = added_force(prepared, "solid_viscosity", {"gamma": 5.0}, base)
+    (hold,) = prepared.fitted
+    in_hold, everywhere = (np.abs(added[hold.curve][mask]).max() for mask in (hold.in_contact, slice(None)))
+    assert judged_peak(prepared, added) == pytest.approx(in_hold / prepared.noise.std)
+    assert in_hold < everywhere
 
 
 @pytest.mark.slow
