@@ -3,6 +3,7 @@ found with its size; and on data ptwin did not write (a shared development set w
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -264,6 +265,19 @@ def test_the_peak_of_a_term_added_is_read_on_the_samples_the_diagnosis_judges(tm
     in_hold, everywhere = (np.abs(added[hold.curve][mask]).max() for mask in (hold.in_contact, slice(None)))
     assert judged_peak(prepared, added) == pytest.approx(in_hold / prepared.noise.std)
     assert in_hold < everywhere
+
+
+def test_a_term_the_recordings_name_already_is_not_added_up_the_ladder(tmp_path, coarse_cache):
+    # Every size of it would be named: the ladder would read the recordings, not the size (a real creep named its
+    # solid relaxation at 8× the noise for a fifteenth of the g it holds). The report gives what they hold.
+    folder = simulated_set(tmp_path / "set", effects={"solid_viscosity": {"gamma": 5.0}})
+    settings = inject_settings(folder, coarse_cache, "inject.term=all", "diagnosis.terms=[solid_viscosity]")
+    lines = []
+    assert detection_limits(settings, tmp_path / "run", progress=lines.append) == {"solid_viscosity": []}
+    assert lines[1].startswith("  [1/1] solid_viscosity: named in the recordings as they are (named (")
+    report = (tmp_path / "run" / "as-recorded" / "report.md").read_text()
+    held = re.search(r"`solid_viscosity` \| named in the recordings as they are \(gamma ([0-9.]+)\): not added", report)
+    assert float(held.group(1)) == pytest.approx(5.0, rel=0.05)
 
 
 @pytest.mark.slow
