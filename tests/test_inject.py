@@ -89,6 +89,32 @@ def test_a_verdict_says_which_other_terms_the_diagnosis_named():
     )
 
 
+def test_other_terms_the_recordings_name_as_they_are_are_said_to_be_theirs():
+    # A real creep names solid_relaxation + power_law_rheology as recorded and with a viscosity added: the viscosity
+    # was not read as them. The names are read off the two diagnoses (``_trial``).
+    from ptwin.pipeline.inject import _trial
+    from ptwin.pipeline.run import RunResult
+
+    def outcome(*named):
+        left_out = [{"term": term, "confidence": "moderate"} for term in named]
+        diagnosis = {"left_out": left_out, "unexplained": False, "permeability": {"base": 2e-16}}
+        return RunResult({}, {**diagnosis, "notes": [], "confounded": []}, {}, {"solid_viscosity": {"gamma": -248.0}})
+
+    recorded = outcome("solid_relaxation", "power_law_rheology")
+    both = _trial(1.0, 4.57, 64.0, recorded, "solid_viscosity", "gamma", recorded)
+    assert both.verdict(Own("gamma", 0.0)).endswith(
+        "the diagnosis named solid_relaxation (moderate) + power_law_rheology (moderate), as in the recordings as "
+        "they are"
+    )
+    one = _trial(
+        1.0, 4.57, 64.0, outcome("pore_pressure_relaxation", "power_law_rheology"), "solid_viscosity", "gamma", recorded
+    )
+    assert one.verdict(Own("gamma", 0.0)).endswith(
+        "+ power_law_rheology (moderate); power_law_rheology as in the recordings as they are"
+    )
+    assert _trial(0.0, None, 0.0, recorded, "solid_viscosity", "gamma").recorded == ()
+
+
 def test_a_term_read_as_another_it_cannot_be_told_from_says_so():
     # Real-noise PAAm null (bench-set p03) with g 0.33 of solid_relaxation added: the diagnosis named
     # strain_dependent_permeability (weak) and listed the two as confounded; the verdict read as a wrong answer.

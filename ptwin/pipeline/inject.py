@@ -87,6 +87,7 @@ class Trial:
     others: tuple[str, ...] = ()  # the other terms the diagnosis named, each with its confidence
     # those of ``others`` the diagnosis could not tell from the term (a group of ``diagnosis.json``'s "confounded")
     confounded: tuple[str, ...] = ()
+    recorded: tuple[str, ...] = ()  # the terms of ``others`` the diagnosis of the recordings as they are names too
     why: tuple[str, ...] = ()  # where it was not named: the diagnosis's notes on the term (which rule left it out)
     permeability: float | None = None  # the base model's K in this diagnosis [m²]
 
@@ -98,7 +99,7 @@ class Trial:
         of no fluid force to 1.2e-15 m²)."""
         strength = own.strength
         if not self.confidence:
-            others = f"; the diagnosis named {' + '.join(self.others)}" if self.others else ""
+            others = f"; the diagnosis named {' + '.join(self.others)}{self._as_recorded()}" if self.others else ""
             if self.confounded:
                 which = "" if self.confounded == self.others else f"; {' + '.join(self.confounded)}"
                 pair = "the two" if len(self.confounded) == 1 else "them"
@@ -116,8 +117,17 @@ class Trial:
         if self.added is not None:
             beyond = own.beyond(self.found)
             size = "; " + (own.below() if beyond is None else f"{number(beyond, '.3g')} over the recordings' own")
-        beside = f"; beside it {' + '.join(self.others)}" if self.others else ""
+        beside = f"; beside it {' + '.join(self.others)}{self._as_recorded()}" if self.others else ""
         return f"named ({self.confidence}), {strength} {found}{size}{beside}"
+
+    def _as_recorded(self) -> str:
+        """Words for the other terms named that the recordings as they are name too: the added term was not read
+        as those (a real creep names a solid relaxation and a power law as recorded, and with a viscosity added)."""
+        if not self.recorded:
+            return ""
+        if len(self.recorded) == len(self.others):
+            return ", as in the recordings as they are"
+        return f"; {' + '.join(self.recorded)} as in the recordings as they are"
 
 
 def added_force(
@@ -186,7 +196,7 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
         peak = write_injected(prepared, inject.term, params, folder / "recordings", base_fit)
         data = replace(settings.data, path=str(folder / "recordings"))
         outcome = run(replace(settings, data=data), folder / "run", quiet)
-        trials.append(_trial(size, params[strength], peak, outcome, inject.term, strength))
+        trials.append(_trial(size, params[strength], peak, outcome, inject.term, strength, as_recorded))
         verdict = trials[-1].verdict(own)
         added = f"{strength} {params[strength]:.3g} added (peak {peak:.1f}× the noise)"
         progress(f"  [{i}/{len(inject.sizes)}] {added}: {verdict}")
@@ -227,7 +237,7 @@ def detection_limits(
             shown = write_injected(prepared, term, params, folder / "recordings", base_fit)
             data = replace(settings.data, path=str(folder / "recordings"))
             outcome = run(replace(settings, data=data), folder / "run", _quiet)
-            found[term].append(_trial(params[strength], params[strength], shown, outcome, term, strength))
+            found[term].append(_trial(params[strength], params[strength], shown, outcome, term, strength, as_recorded))
             progress(
                 f"  [{i}/{len(terms)}] {term}: {strength} {params[strength]:.3g} (peak {shown:.1f}× the noise): "
                 f"{found[term][-1].verdict(native[term])}"
@@ -317,11 +327,23 @@ def _quiet(_: str) -> None:
     """Progress of the runs inside an injection, not shown."""
 
 
-def _trial(size: float, added: float | None, peak: float, outcome: RunResult, term: str, strength: str) -> Trial:
+def _trial(
+    size: float,
+    added: float | None,
+    peak: float,
+    outcome: RunResult,
+    term: str,
+    strength: str,
+    as_recorded: RunResult | None = None,
+) -> Trial:
+    """The ``Trial`` of one diagnosis (``outcome``); ``as_recorded``: that of the recordings as they are, where
+    ``outcome`` is one with the term added."""
     diagnosis, candidate = outcome.diagnosis, term in outcome.candidates
     unexplained, permeability = diagnosis["unexplained"], diagnosis["permeability"]["base"]
     named = [e for e in diagnosis["left_out"] if e["term"] != term]
     others = tuple(f"{e['term']} ({e['confidence']})" for e in named)
+    before = set() if as_recorded is None else {e["term"] for e in as_recorded.diagnosis["left_out"]}
+    recorded = tuple(e["term"] for e in named if e["term"] in before)
     entry = next((e for e in diagnosis["left_out"] if e["term"] == term), None)
     if entry is None:
         alone = (outcome.candidates.get(term) or {}).get(strength)
@@ -340,11 +362,23 @@ def _trial(size: float, added: float | None, peak: float, outcome: RunResult, te
             alone,
             others,
             confounded=confounded,
+            recorded=recorded,
             why=why,
             permeability=permeability,
         )
     value, interval = entry["params"][strength], entry["param_interval"][strength]
-    return Trial(size, added, peak, entry["confidence"], value, interval, unexplained, candidate, others=others)
+    return Trial(
+        size,
+        added,
+        peak,
+        entry["confidence"],
+        value,
+        interval,
+        unexplained,
+        candidate,
+        others=others,
+        recorded=recorded,
+    )
 
 
 def no_candidate(term: str, trials: list[Trial], listed: list[str]) -> str | None:
