@@ -306,6 +306,15 @@ def test_a_term_the_recordings_name_already_is_not_added_up_the_ladder(tmp_path,
     assert float(held.group(1)) == pytest.approx(5.0, rel=0.05)
 
 
+def test_a_term_not_added_because_named_is_told_from_one_whose_sizes_never_reach_the_ladder():
+    from ptwin.pipeline.inject import limits_section
+
+    native = {"solid_relaxation": Own("g", 0.148), "cantilever_drag": Own("b", 0.0)}
+    rows = limits_section({"solid_relaxation": [], "cantilever_drag": []}, native, {"solid_relaxation"})[-2:]
+    assert rows[0] == "| `solid_relaxation` | named in the recordings as they are (g 0.148): not added | – | – | – |"
+    assert rows[1].startswith("| `cantilever_drag` | its peak stays below 8× the noise up to 1000× a typical size")
+
+
 @pytest.mark.slow
 def test_the_detection_limit_of_every_candidate_term_is_in_the_report(tmp_path, coarse_cache):
     settings = inject_settings(

@@ -223,13 +223,14 @@ def detection_limits(
     prepared = prepare(settings, _quiet)
     base_fit = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
     terms = candidate_settings(prepared, settings)[0].terms
-    found, native = {}, {}
+    found, native, already = {}, {}, set()
     for i, term in enumerate(terms, start=1):
         strength = next(iter(VOCABULARY[term].PARAMS))
         recorded = _trial(0.0, None, 0.0, as_recorded, term, strength)
         native[term] = native_strength(prepared, term, settings.optim.physics_fit.iterations, base_fit, recorded)
         found[term] = []
         if recorded.confidence:  # every size would be named: the ladder would read the recordings, not the size
+            already.add(term)
             progress(f"  [{i}/{len(terms)}] {term}: {ALREADY} ({recorded.verdict(native[term])}); not added")
             continue
         for peak, params in _ladder(prepared, term, base_fit):
@@ -244,7 +245,7 @@ def detection_limits(
             )
             if found[term][-1].confidence:
                 break
-    section = limits_section(found, native)
+    section = limits_section(found, native, already)
     with (output_dir / "as-recorded" / "report.md").open("a") as report:
         report.write("\n" + "\n".join(section) + "\n")
     return found
@@ -284,9 +285,10 @@ def _ladder(prepared: Prepared, term: str, base_fit: PhysicsFit) -> list[tuple[f
     return ladder
 
 
-def limits_section(found: dict[str, list[Trial]], native: dict[str, Own]) -> list[str]:
+def limits_section(found: dict[str, list[Trial]], native: dict[str, Own], already: set[str]) -> list[str]:
     """report.md's section of ``detection_limits``: each term's smallest size named, or the largest tried (a
-    size found is read against the term's ``native`` strength, as ``detection`` reads it)."""
+    size found is read against the term's ``native`` strength, as ``detection`` reads it); ``already``: the terms
+    the recordings as they are name, not added."""
     lines = [
         "## What these recordings could have shown",
         "",
@@ -300,9 +302,13 @@ def limits_section(found: dict[str, list[Trial]], native: dict[str, Own]) -> lis
         "|---|---|---|---|---|",
     ]
     for term, trials in found.items():
-        if not trials:
+        if term in already:
             own = native[term]
             lines.append(f"| `{term}` | {ALREADY} ({own.strength} {own.value:.3g}): not added | – | – | – |")
+            continue
+        if not trials:
+            reach = f"its peak stays below {LADDER[0]:g}× the noise up to {_FACTORS[-1]:g}× a typical size"
+            lines.append(f"| `{term}` | {reach}: not added | – | – | – |")
             continue
         strength = next(iter(VOCABULARY[term].PARAMS))
         unit = VOCABULARY[term].PARAMS[strength].unit
@@ -313,8 +319,7 @@ def limits_section(found: dict[str, list[Trial]], native: dict[str, Own]) -> lis
             verdict = missed[-1].verdict(native[term])
             last = f"{strength} {missed[-1].added:.3g} {unit} ({missed[-1].peak:.0f}×: {verdict})"
         if named is None:
-            reach = f"{trials[-1].peak:.0f}" if trials else "–"
-            lines.append(f"| `{term}` | not named up to a peak of {reach}× the noise | – | – | {last} |")
+            lines.append(f"| `{term}` | not named up to a peak of {trials[-1].peak:.0f}× the noise | – | – | {last} |")
         else:
             lines.append(
                 f"| `{term}` | {strength} {named.added:.3g} {unit} | {named.peak:.1f} | "
