@@ -82,7 +82,9 @@ def test_a_verdict_says_which_other_terms_the_diagnosis_named():
         "solid_relaxation (weak)"
     )
     named = Trial(2.0, 10.0, 73.2, "weak", 9.79, [8.61, 11.1], False, True, others=others[1:])
-    assert named.verdict(Own("gamma", 0.0)).endswith("9.79 over the recordings' own; beside it solid_relaxation (weak)")
+    assert named.verdict(Own("gamma", 0.0)).endswith(
+        "9.79 over the recordings' own, 0.979× the size added; beside it solid_relaxation (weak)"
+    )
     alone = Trial(2.0, 10.0, 73.2, "weak", 9.79, [8.61, 11.1], False, True)
     assert "beside" not in alone.verdict(Own("gamma", 0.0)) and "the diagnosis named" not in alone.verdict(
         Own("gamma", 0.0)
@@ -137,7 +139,11 @@ def test_a_size_found_of_a_term_that_vanishes_as_its_strength_grows_adds_in_its_
     # as "-2.04e+06 over the recordings' own". Its force is ∝ 1/M: the added 1/M is the difference of the two.
     own = Own("M", 2.05e6, math.inf)
     named = Trial(1.0, 1.07e4, 64.7, "weak", 1.03e4, [9.75e3, 1.09e4], False, True)
-    assert named.verdict(own).endswith(f"; {1 / (1 / 1.03e4 - 1 / 2.05e6):.3g} over the recordings' own")
+    # the size found beside the size added in 1/M too: 1/1.04e4 over 1/1.07e4
+    beyond = 1 / (1 / 1.03e4 - 1 / 2.05e6)
+    assert named.verdict(own).endswith(
+        f"; {beyond:.3g} over the recordings' own, {1.07e4 / beyond:.3g}× the size added"
+    )
     assert own.beyond(3e6) is None and Own("M", math.inf, math.inf).beyond(1e4) == pytest.approx(1e4)
     weaker = Trial(1.0, 1.07e4, 64.7, "weak", 3e6, [2e6, 4e6], False, True)
     assert weaker.verdict(own).endswith(
@@ -171,8 +177,13 @@ def test_a_size_named_beside_unexplained_structure_is_given_without_an_interval(
     # these data" hid the size it took; the words say where the missing interval comes from instead.
     named = Trial(1.0, 5.0, 42.8, "weak", 6.15, [None, None], True, True)
     assert named.verdict(Own("gamma", 0.615)) == (
-        "named (weak), gamma 6.15 (from a model that misses the data: no interval holds); 5.54 over the recordings' own"
+        "named (weak), gamma 6.15 (from a model that misses the data: no interval holds); 5.54 over the recordings' "
+        "own, 1.11× the size added"
     )
+    # Real agarose B with g 0.546 of solid_relaxation added: named beside such structure at g 1.41e+03, which the
+    # verdict read as "1.41e+03 over the recordings' own" and the ladder as found; the size added says otherwise.
+    relaxation = Trial(64.0, 0.546, 64.0, "weak", 1410.0, [None, None], True, True)
+    assert relaxation.verdict(Own("g", 0.0)).endswith("1.41e+03 over the recordings' own, 2.58e+03× the size added")
 
 
 def test_the_section_says_which_rule_left_an_added_term_unnamed():
