@@ -241,7 +241,8 @@ def detection_limits(
         found[term] = []
         if recorded.confidence:  # every size would be named: the ladder would read the recordings, not the size
             already.add(term)
-            progress(f"  [{i}/{len(terms)}] {term}: {ALREADY} ({recorded.verdict(native[term])}); not added")
+            held = bounded(recorded.found, recorded.interval, ".3g", misses_data=recorded.unexplained)
+            progress(f"  [{i}/{len(terms)}] {term}: {ALREADY} ({recorded.confidence}), {strength} {held}; not added")
             continue
         for peak, params in _ladder(prepared, term, base_fit):
             folder = output_dir / f"{term}-peak-{peak:g}"
