@@ -332,6 +332,25 @@ def test_a_term_the_recordings_name_already_is_not_added_up_the_ladder(tmp_path,
     assert float(held.group(1)) == pytest.approx(5.0, rel=0.05)
 
 
+def test_recordings_that_name_as_many_terms_as_are_fitted_together_say_another_needs_more():
+    # The public JPK creep names solid_relaxation + power_law_rheology as recorded: with diagnosis.max_terms 2 no term
+    # added beside them can be named, whatever its size.
+    from types import SimpleNamespace
+
+    from ptwin.pipeline.inject import _full
+    from ptwin.pipeline.run import RunResult
+
+    def named(*terms):
+        return RunResult({}, {"left_out": [{"term": term} for term in terms]}, {}, {})
+
+    settings = SimpleNamespace(diagnosis=SimpleNamespace(max_terms=2))
+    assert _full(named("solid_relaxation", "power_law_rheology"), settings)[-1] == (
+        "The recordings as they are name solid_relaxation + power_law_rheology, diagnosis.max_terms (2) already: a "
+        "term added beside them can be named only with diagnosis.max_terms=3."
+    )
+    assert _full(named("solid_relaxation"), settings) == [] and _full(named(), settings) == []
+
+
 def test_a_term_not_added_because_named_is_told_from_one_whose_sizes_never_reach_the_ladder():
     from ptwin.pipeline.inject import limits_section
 

@@ -210,10 +210,10 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
         verdict = trials[-1].verdict(own)
         added = f"{strength} {params[strength]:.3g} added (peak {peak:.1f}× the noise)"
         progress(f"  [{i}/{len(inject.sizes)}] {added}: {verdict}")
-    section = detection_section(inject.term, trials, own, settings.diagnosis.terms)
+    section, full = detection_section(inject.term, trials, own, settings.diagnosis.terms), _full(as_recorded, settings)
     with (output_dir / "as-recorded" / "report.md").open("a") as report:
-        report.write("\n" + "\n".join(section) + "\n")
-    progress("\n".join(section[-1:]))
+        report.write("\n" + "\n".join(section + full) + "\n")
+    progress("\n".join(section[-1:] + full[1:]))
     return trials
 
 
@@ -256,7 +256,7 @@ def detection_limits(
             )
             if found[term][-1].confidence:
                 break
-    section = limits_section(found, native, already)
+    section = limits_section(found, native, already) + _full(as_recorded, settings)
     with (output_dir / "as-recorded" / "report.md").open("a") as report:
         report.write("\n" + "\n".join(section) + "\n")
     return found
@@ -359,6 +359,20 @@ def limits_section(found: dict[str, list[Trial]], native: dict[str, Own], alread
                 f"{named.verdict(native[term])} | {last} |"
             )
     return lines
+
+
+def _full(as_recorded: RunResult, settings: InjectRunSettings) -> list[str]:
+    """A line where the recordings as they are name ``diagnosis.max_terms`` terms already: a term added can be named
+    beside them only in a larger subset, which the diagnosis does not fit (a real creep names two)."""
+    named = [entry["term"] for entry in as_recorded.diagnosis["left_out"]]
+    cap = settings.diagnosis.max_terms
+    if not named or len(named) < cap:
+        return []
+    return [
+        "",
+        f"The recordings as they are name {' + '.join(named)}, diagnosis.max_terms ({cap}) already: a term added "
+        f"beside them can be named only with diagnosis.max_terms={len(named) + 1}.",
+    ]
 
 
 def _quiet(_: str) -> None:
