@@ -63,8 +63,8 @@ class Own:
         return 1.0 / excess if excess > 0 else None
 
     def share(self, beyond: float, added: float) -> float:
-        """A strength ``beyond`` the own (``beyond``'s) as a multiple of the ``added`` one: in 1/M for a strength
-        whose term vanishes as it grows."""
+        """What a size found adds to the own (``beyond``'s answer) as a multiple of the size ``added``: in 1/M for a
+        strength whose term vanishes as it grows."""
         return beyond / added if self.absent != math.inf else added / beyond
 
     def below(self) -> str:
@@ -296,7 +296,9 @@ def _ladder(prepared: Prepared, term: str, base_fit: PhysicsFit) -> list[tuple[f
 PEAK_TOLERANCE = 0.02  # relative: how near a ladder's size peaks to the peak asked for
 
 
-def _crossing(peak: Callable[[float], float], target: float, weaker: float, low: float, stronger: float, high: float):
+def _crossing(
+    peak: Callable[[float], float], target: float, weaker: float, low: float, stronger: float, high: float
+) -> float:
     """The strength between ``weaker`` (peak ``low`` < ``target``) and ``stronger`` (peak ``high`` ≥ it) whose
     ``peak`` is within ``PEAK_TOLERANCE`` of ``target``: interpolated log-log (exact where the peak is a power of
     the strength, as for most terms), the bracket narrowed to the side the peak falls on until it is (the stronger
