@@ -117,7 +117,7 @@ class Trial:
             base = None if self.permeability is None else f"the base model's K {permeability_words(self.permeability)}"
             what = "; ".join(part for part in (fitted, base) if part)
             return f"{said} ({what}){others}" if what else f"{said}{others}"
-        found = bounded(self.found, self.interval, ".3g", misses_data=self.unexplained)
+        found = self.found_words()
         size = ""
         if self.added is not None:
             beyond = own.beyond(self.found)
@@ -129,6 +129,10 @@ class Trial:
                 size = f"; {number(beyond, '.3g')} over the recordings' own, {share:.3g}× the size added"
         beside = f"; beside it {' + '.join(self.others)}{self._as_recorded()}" if self.others else ""
         return f"named ({self.confidence}), {strength} {found}{size}{beside}"
+
+    def found_words(self) -> str:
+        """The strength found, with its 95% interval where one holds (``bounded``)."""
+        return bounded(self.found, self.interval, ".3g", misses_data=self.unexplained)
 
     def _as_recorded(self) -> str:
         """Words for the other terms named that the recordings as they are name too: the added term was not read
@@ -191,28 +195,21 @@ def judged_peak(prepared: Prepared, added: dict[str, np.ndarray]) -> float:
 def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[[str], None] = print) -> list[Trial]:
     """Diagnose the recordings as they are, then with the term added at each size; the report of the first
     gets a section on what these recordings could have shown."""
-    inject, quiet = settings.inject, _quiet
+    inject = settings.inject
     strength = next(iter(VOCABULARY[inject.term].PARAMS))
     progress(f"inject: the recordings as they are ({len(inject.sizes) + 1} diagnoses in all)")
-    as_recorded = run(settings, output_dir / "as-recorded", quiet)
+    as_recorded, prepared, base_fit = _as_recorded(settings, output_dir)
     trials = [_trial(0.0, None, 0.0, as_recorded, inject.term, strength)]
-    prepared = prepare(settings, quiet)
-    base_fit = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
     own = native_strength(prepared, inject.term, settings.optim.physics_fit.iterations, base_fit, trials[0])
     progress(f"  as recorded: {trials[0].verdict(own)}; a size found is read over {own.words()}")
     for i, size in enumerate(sorted(inject.sizes), start=1):
         params = inject.scaled(size)
-        folder = output_dir / f"size-{size:g}"
-        peak = write_injected(prepared, inject.term, params, folder / "recordings", base_fit)
-        data = replace(settings.data, path=str(folder / "recordings"))
-        outcome = run(replace(settings, data=data), folder / "run", quiet)
-        trials.append(_trial(size, params[strength], peak, outcome, inject.term, strength, as_recorded))
-        verdict = trials[-1].verdict(own)
-        added = f"{strength} {params[strength]:.3g} added (peak {peak:.1f}× the noise)"
-        progress(f"  [{i}/{len(inject.sizes)}] {added}: {verdict}")
+        trial = _added(settings, prepared, base_fit, as_recorded, inject.term, params, output_dir / f"size-{size:g}")
+        trials.append(replace(trial, size=size))
+        added = f"{strength} {params[strength]:.3g} added (peak {trial.peak:.1f}× the noise)"
+        progress(f"  [{i}/{len(inject.sizes)}] {added}: {trial.verdict(own)}")
     section, full = detection_section(inject.term, trials, own, settings.diagnosis.terms), _full(as_recorded, settings)
-    with (output_dir / "as-recorded" / "report.md").open("a") as report:
-        report.write("\n" + "\n".join(section + full) + "\n")
+    _append(output_dir, section + full)
     progress("\n".join(section[-1:] + full[1:]))
     return trials
 
@@ -229,9 +226,7 @@ def detection_limits(
     a fifteenth of what it holds). The report of the recordings as they are gets a section with each term's
     smallest size named."""
     progress("inject: the recordings as they are, then every candidate term at growing sizes until named")
-    as_recorded = run(settings, output_dir / "as-recorded", _quiet)
-    prepared = prepare(settings, _quiet)
-    base_fit = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+    as_recorded, prepared, base_fit = _as_recorded(settings, output_dir)
     terms = candidate_settings(prepared, settings)[0].terms
     found, native, already = {}, {}, set()
     for i, term in enumerate(terms, start=1):
@@ -241,25 +236,53 @@ def detection_limits(
         found[term] = []
         if recorded.confidence:  # every size would be named: the ladder would read the recordings, not the size
             already.add(term)
-            held = bounded(recorded.found, recorded.interval, ".3g", misses_data=recorded.unexplained)
-            progress(f"  [{i}/{len(terms)}] {term}: {ALREADY} ({recorded.confidence}), {strength} {held}; not added")
+            held = f"{strength} {recorded.found_words()}"
+            progress(f"  [{i}/{len(terms)}] {term}: {ALREADY} ({recorded.confidence}), {held}; not added")
             continue
         for peak, params in _ladder(prepared, term, base_fit):
             folder = output_dir / f"{term}-peak-{peak:g}"
-            shown = write_injected(prepared, term, params, folder / "recordings", base_fit)
-            data = replace(settings.data, path=str(folder / "recordings"))
-            outcome = run(replace(settings, data=data), folder / "run", _quiet)
-            found[term].append(_trial(params[strength], params[strength], shown, outcome, term, strength, as_recorded))
+            trial = _added(settings, prepared, base_fit, as_recorded, term, params, folder)
+            found[term].append(trial)
             progress(
-                f"  [{i}/{len(terms)}] {term}: {strength} {params[strength]:.3g} (peak {shown:.1f}× the noise): "
-                f"{found[term][-1].verdict(native[term])}"
+                f"  [{i}/{len(terms)}] {term}: {strength} {params[strength]:.3g} (peak {trial.peak:.1f}× the noise): "
+                f"{trial.verdict(native[term])}"
             )
-            if found[term][-1].confidence:
+            if trial.confidence:
                 break
-    section = limits_section(found, native, already) + _full(as_recorded, settings)
+    _append(output_dir, limits_section(found, native, already) + _full(as_recorded, settings))
+    return found
+
+
+def _as_recorded(settings: InjectRunSettings, output_dir: Path) -> tuple[RunResult, Prepared, PhysicsFit]:
+    """The recordings as they are: diagnosed as train.py would (its output in ``output_dir/as-recorded``), prepared,
+    and the base model fitted to their training samples (what every term is added on)."""
+    as_recorded = run(settings, output_dir / "as-recorded", _quiet)
+    prepared = prepare(settings, _quiet)
+    return as_recorded, prepared, fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+
+
+def _added(
+    settings: InjectRunSettings,
+    prepared: Prepared,
+    base_fit: PhysicsFit,
+    as_recorded: RunResult,
+    term: str,
+    params: dict[str, float],
+    folder: Path,
+) -> Trial:
+    """``term`` at ``params`` added to the recordings (written in ``folder/recordings``) and diagnosed as train.py
+    would (in ``folder/run``): its ``Trial``, its size the strength added."""
+    strength = next(iter(VOCABULARY[term].PARAMS))
+    peak = write_injected(prepared, term, params, folder / "recordings", base_fit)
+    data = replace(settings.data, path=str(folder / "recordings"))
+    outcome = run(replace(settings, data=data), folder / "run", _quiet)
+    return _trial(params[strength], params[strength], peak, outcome, term, strength, as_recorded)
+
+
+def _append(output_dir: Path, section: list[str]) -> None:
+    """``section`` at the end of the report of the recordings as they are."""
     with (output_dir / "as-recorded" / "report.md").open("a") as report:
         report.write("\n" + "\n".join(section) + "\n")
-    return found
 
 
 LADDER = (8.0, 16.0, 32.0, 64.0)  # peaks of the added force over the noise std, tried smallest first

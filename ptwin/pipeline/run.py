@@ -207,8 +207,8 @@ def _residual_noise(
     """The noise's correlation measured on the residual in contact of a model's ``predict``, less a polynomial of
     ``degree`` in time per curve (``source`` says which), where the baselines could not give it
     (``rests_on_short_records``); None where they could, or no curve has a record long enough. The samples are
-    rebuilt under it by ``diagnose_set`` (``Samples.from_curves``: a curve whose own baseline measured more keeps
-    its own κ² for the whiteness test)."""
+    rebuilt under it by ``_rebuilt`` (``Samples.from_curves``: a curve whose own baseline measured more keeps its
+    own κ² for the whiteness test)."""
     if not rests_on_short_records(prepared.noise):
         return None
     samples = prepared.samples
