@@ -34,10 +34,16 @@ def ar1(lag1, size=20000, std=1.3e-11, seed=0):
 
 def mixed(rng, size, correlation_samples, white_share):
     """Unit-variance noise: a white part and an AR(1) part of the given correlation time (samples)."""
-    memory = np.exp(-1.0 / correlation_samples)
-    return np.sqrt(1 - white_share) * correlated_noise(rng, size, 1.0, memory) + np.sqrt(white_share) * rng.normal(
-        size=size
-    )
+    return correlated_noise(rng, size, 1.0, np.exp(-1.0 / correlation_samples), white_share)
+
+
+def test_simulated_noise_with_a_white_floor_has_the_noise_models_autocorrelation():
+    # ρ_k = (1 − share)·φ^k: what ``ptwin.data.noise`` fits and the bench-sets' AR(1) noise with a white floor has.
+    noise = correlated_noise(np.random.default_rng(3), 400_000, 2.0, 0.95, white_share=0.4)
+    assert noise.std() == pytest.approx(2.0, rel=0.02)
+    for lag in (1, 5, 20):
+        measured = np.corrcoef(noise[:-lag], noise[lag:])[0, 1]
+        assert measured == pytest.approx(0.6 * 0.95**lag, abs=0.01)
 
 
 def detrended(values):

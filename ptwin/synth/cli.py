@@ -114,7 +114,12 @@ def _parser(defaults: Experiment) -> argparse.ArgumentParser:
     parser.add_argument("--z-end", type=float, default=defaults.z_end, help="final base displacement [m]")
     parser.add_argument("--sample-rate", type=float, help="[Hz]: samples per curve from its duration (else --samples)")
     parser.add_argument("--noise", type=float, default=defaults.noise_std, help="force noise σ [N]")
-    parser.add_argument("--noise-correlation", type=float, default=0.0, help="lag-1 autocorrelation of the noise")
+    parser.add_argument(
+        "--noise-correlation", type=float, default=0.0, help="lag-1 autocorrelation of the noise's AR(1) part"
+    )
+    parser.add_argument(
+        "--noise-white-share", type=float, default=0.0, help="share of the noise variance that is white beside it"
+    )
     parser.add_argument("--replicates", type=int, default=1, help="curves per speed (v5, v5b, ...)")
     parser.add_argument("--stiffness-spread", type=float, default=0.0, help="relative std of E* between curves")
     parser.add_argument(
@@ -155,6 +160,7 @@ def main(argv: list[str] | None = None) -> None:
             sample_rate=args.sample_rate,
             noise_std=args.noise,
             noise_correlation=args.noise_correlation,
+            noise_white_share=args.noise_white_share,
             replicates=args.replicates,
             stiffness_spread=args.stiffness_spread,
             contact_point="estimate" if args.contact_error or args.baseline_offset or args.tilt else "known",

@@ -98,7 +98,8 @@ class Experiment:
     rtol: float = 1e-9
     fluid_basis: str | None = None  # a PGD basis file: F_D from FluidForce instead of the closed form
     # What real recordings have (off by default):
-    noise_correlation: float = 0.0  # lag-1 autocorrelation of the force noise, an AR(1)
+    noise_correlation: float = 0.0  # lag-1 autocorrelation of the force noise's AR(1) part
+    noise_white_share: float = 0.0  # share of the noise variance that is white beside it (a white floor)
     replicates: int = 1  # curves per speed: ids v5, v5b, v5c, ...
     stiffness_spread: float = 0.0  # relative std of E* from curve to curve (each a different spot)
     contact_point: str = "known"  # "estimate": the recorded z is off by a random error per curve
@@ -376,7 +377,7 @@ def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
     for speed, replicate, hold, number in protocols:
         modulus = e.effective_modulus * (1.0 + e.stiffness_spread * artefacts.standard_normal())
         curve = simulate_curve(e, speed, modulus, hold, balance=False)  # a recording has no balance to check
-        noise = correlated_noise(rng, curve.force.size, e.noise_std, e.noise_correlation)
+        noise = correlated_noise(rng, curve.force.size, e.noise_std, e.noise_correlation, e.noise_white_share)
         travel = curve.z - curve.z[0] + e.z_start  # the true base travel from contact
         offset = e.baseline_offset * artefacts.standard_normal() + e.tilt * travel
         z = curve.z + (e.contact_error * artefacts.standard_normal() if e.contact_point == "estimate" else 0.0)
@@ -403,11 +404,17 @@ def simulate(experiment: Experiment) -> tuple[Meta, pd.DataFrame]:
     return meta, curves
 
 
-def correlated_noise(rng: np.random.Generator, size: int, std: float, lag1: float) -> np.ndarray:
-    """Stationary AR(1) noise of std ``std`` and lag-1 correlation ``lag1`` (white for 0)."""
+def correlated_noise(
+    rng: np.random.Generator, size: int, std: float, lag1: float, white_share: float = 0.0
+) -> np.ndarray:
+    """Stationary noise of std ``std``: an AR(1) of lag-1 correlation ``lag1`` (white for 0) and, for a
+    ``white_share`` of the variance, white noise beside it (``ptwin.data.noise``'s model: ρ_k = (1 − share)·lag1^k)."""
     white = rng.normal(0.0, std, size)
     if lag1 == 0.0:
         return white
     first = white[:1]
     rest = scipy.signal.lfilter([np.sqrt(1.0 - lag1**2)], [1.0, -lag1], white[1:], zi=lag1 * first)[0]
-    return np.concatenate([first, rest])
+    correlated = np.concatenate([first, rest])
+    if white_share == 0.0:
+        return correlated
+    return np.sqrt(1.0 - white_share) * correlated + np.sqrt(white_share) * rng.normal(0.0, std, size)
