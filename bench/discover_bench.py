@@ -21,8 +21,8 @@ Four suites of its own, each a table, then the shared development sets (``bench/
 
 Beside them, not in ``all`` (``--suite seeds``, ~60 diagnoses): the false-alarm rate and the detection rate
 over seeds, on nulls and on sets with a pore relaxation in the bench-sets' p01/p07 setting (their AR(1) noise
-with a white floor, 0.3 µm of baseline, the noise std in meta.yaml), with the block inflation each set's
-baselines measured beside the one the noise was drawn with.
+with a white floor, 0.3 µm of baseline, the noise std in meta.yaml), with the block inflation each null's
+diagnosis used beside the one the noise was drawn with.
 
 A case is right when the named terms are the concealed ones (nulls: none; the outside
 effect: unexplained) with K within 5%; or, honestly, when nothing is claimed beyond weak
@@ -249,7 +249,8 @@ def diagnose(
 def run_seeds(overrides: list[str], scratch: Path, count: int) -> None:
     """``count`` nulls and as many sets with ``SEEDED_TERM`` in the ``SEEDED`` setting, one seed each, diagnosed and
     tallied: how often noise alone is taken for a term or for unexplained structure, how often the term is named,
-    another named in its place, or nothing; and the block inflation measured against the one the noise has."""
+    another named in its place, or nothing; and the block inflation the nulls were judged under against the one
+    the noise has."""
     ((term, params),) = SEEDED_TERM.items()
     truth = model_inflation(1.0 - SEEDED["noise_white_share"], SEEDED["noise_correlation"], 50)
     print(f"\nseeds: {count} nulls and {count} sets with {term} {params} in the bench-sets' p01/p07 setting")
@@ -278,7 +279,7 @@ def run_seeds(overrides: list[str], scratch: Path, count: int) -> None:
         f"{term} named {named}/{count} ({strong} strong); another term named {other}/{count}; nothing {nothing}/{count}"
     )
     print(
-        f"block inflation the nulls' baselines measured: median {middle:.1f} (5–95%: {low:.1f}–{high:.1f}), "
+        f"block inflation the nulls' diagnoses used: median {middle:.1f} (5–95%: {low:.1f}–{high:.1f}), "
         f"against {truth:.1f} of the noise drawn"
     )
 

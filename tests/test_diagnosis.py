@@ -40,6 +40,35 @@ def test_a_noise_std_the_twins_residual_says_may_read_low_is_said_with_its_bound
     assert not any("read off second differences" in note for note in clean_run[0].diagnosis["notes"])
 
 
+def test_baselines_that_read_the_noise_too_correlated_are_capped_by_what_the_residuals_show(tmp_path, coarse_cache):
+    # The shared p07's setting: four baselines of 160 samples of AR(1) noise of 20-sample memory, 40% white, a pore
+    # relaxation of M 5e4. At this seed the baselines read κ² 38 (the fastest curve alone 45) for the noise's 15.6,
+    # and the pore went unnamed; the residuals in contact read 21 (the noise and the elastic law's inherited noise),
+    # which caps it, and the pore is named.
+    from dataclasses import replace
+
+    from ptwin.data.noise import model_inflation
+    from ptwin.data.recordings import write_recordings
+    from ptwin.pipeline.run import CAPPED
+    from ptwin.synth.simulator import Experiment, simulate
+
+    memory, white = math.exp(-1 / 20), 0.4
+    experiment = Experiment(
+        **dict(probe_radius=10e-6, spring_constant=2.0, sample_thickness=5e-3, permeability=3e-16),
+        **dict(effective_modulus=1.5e4, base_speeds=(1e-6, 4e-6, 16e-6, 64e-6), samples=1500),
+        **dict(z_start=-0.3e-6, z_end=2.65e-6, noise_std=2.5e-10, noise_correlation=memory, noise_white_share=white),
+        seed=4,
+        effects={"pore_pressure_relaxation": {"M": 5.0e4}},
+    )
+    meta, curves = simulate(experiment)
+    write_recordings(tmp_path / "set", replace(meta, noise_std=experiment.noise_std), curves)
+    diagnosis = run(tmp_path / "set", coarse_cache, tmp_path / "run").diagnosis
+    truth = model_inflation(1 - white, memory, 50)
+    assert CAPPED in diagnosis["noise"]["source"]
+    assert truth <= diagnosis["noise"]["inflation"] < 1.5 * truth
+    assert [entry["term"] for entry in diagnosis["left_out"]] == ["pore_pressure_relaxation"]
+
+
 def test_concealed_viscosity_is_named_and_refitted(viscous_run):
     diagnosis = viscous_run.diagnosis
     assert diagnosis["mismatch"]["detected"] is True

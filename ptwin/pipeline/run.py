@@ -52,6 +52,7 @@ FLEXIBLE_DEGREE = 6
 # A σ read off second differences that the twin's residual says may read this many times low gets a note: its χ²
 # would be 1.44× the noise's, beyond what the structure test's model error tolerates.
 LOW_STD = 1.2
+CAPPED = "its correlation capped by what a model's residual in contact shows (a line removed per curve)"
 BASE_RESIDUAL = (
     f"the base model's residual in contact, less a polynomial of degree {FLEXIBLE_DEGREE} in time per curve "
     "(no baseline of 100 samples)"
@@ -140,21 +141,32 @@ def diagnose_set(
     candidates, notes = candidate_settings(prepared, settings)
     if twin is not None and measured is not None:
         notes += _uncorrected_std(prepared)
-    return diagnose(
-        prepared.make_model,
-        prepared.samples,
-        prepared.split,
-        twin,
-        identification.apparent,
-        candidates,
-        settings.optim.physics_fit.iterations,
-        prepared.noise,
-        progress,
-        base_fit=base_fit,
-        notes=notes,
-        design=_design(prepared, settings) if settings.diagnosis.design else None,
-        reference=prepared.make_model.reference,
+
+    def diagnosed(prepared: Prepared, base_fit: PhysicsFit | None) -> Diagnosis:
+        return diagnose(
+            prepared.make_model,
+            prepared.samples,
+            prepared.split,
+            twin,
+            identification.apparent,
+            candidates,
+            settings.optim.physics_fit.iterations,
+            prepared.noise,
+            progress,
+            base_fit=base_fit,
+            notes=notes,
+            design=_design(prepared, settings) if settings.diagnosis.design else None,
+            reference=prepared.make_model.reference,
+        )
+
+    diagnosis = diagnosed(prepared, base_fit)
+    capped = None if measured is not None else _capped_by_residuals(prepared, diagnosis, block)
+    if capped is None:
+        return diagnosis
+    progress(
+        f"diagnosis again: the noise's block inflation read off the baselines is capped at {capped.noise.inflation:.3g}"
     )
+    return diagnosed(capped, None)
 
 
 def _on_twin_residual(prepared: Prepared, twin: HybridTwin, block: int) -> Prepared | None:
@@ -194,6 +206,52 @@ def _on_base_residual(prepared: Prepared, base_fit: PhysicsFit, block: int) -> P
     law = prepared.make_model.reference
     law.noise_std = corrected(next(c.noise for c in prepared.curves if c.curve == law.curve), noise).std
     return _rebuilt(prepared, [replace(c, noise=corrected(c.noise, noise)) for c in prepared.fitted], noise)
+
+
+def _capped_by_residuals(prepared: Prepared, diagnosis: Diagnosis, block: int) -> Prepared | None:
+    """``prepared`` with the correlation its baselines gave capped by what a model's residual in contact shows, or
+    None where no residual shows less. A residual holds the noise, the elastic law's inherited noise and whatever
+    the model misses, so its block inflation reads the noise's or more: the least over the base model and each
+    usable single term's (a line removed per curve) bounds the noise's from above, on records ten times the
+    baselines' (p07-like sets, four baselines of 160 samples of AR(1) noise of 20-sample memory, 40% white:
+    κ² 5.2–40 from the baselines, 16.7–24 from the residuals, 15.6 the noise's). A curve's own κ² is capped by
+    its own residual's the same way. κ² is then the lesser of the two readings; the ν blocks the tests rest on stay
+    the baselines'."""
+    samples = prepared.samples
+    curve, in_contact = samples.curve.cpu().numpy(), samples.in_contact.cpu().numpy()
+    step = float(np.median(np.diff(samples.time.cpu().numpy()[curve == 0])))
+    best, own = None, {}
+    for terms, candidate in diagnosis.candidates.items():
+        if len(terms) > 1 or not candidate.usable:
+            continue
+        with torch.no_grad():
+            residual = (candidate.fit.model(samples) - samples.force).cpu().numpy()
+        records = [residual[(curve == i) & in_contact] for i in range(len(samples.curve_ids))]
+        noise = residual_noise(records, prepared.noise.std, step, block, 1, CAPPED)
+        if noise is None:
+            continue
+        if best is None or noise.inflation < best.inflation:
+            best = noise
+        for curve_id, record in zip(samples.curve_ids, records):
+            alone = residual_noise([record], prepared.noise.std, step, block, 1, CAPPED)
+            if alone is not None:
+                own[curve_id] = min(own.get(curve_id, np.inf), alone.inflation)
+    if best is None or best.inflation >= prepared.noise.inflation:
+        return None
+    noise = replace(
+        prepared.noise,
+        share=best.share,
+        memory=best.memory,
+        lag1=best.lag1,
+        inflation=best.inflation,
+        correlation_time=best.correlation_time,
+        source=f"{prepared.noise.source}, {CAPPED}",
+    )
+    fitted = [
+        replace(c, noise=replace(c.noise, inflation=min(c.noise.inflation, own.get(c.curve, np.inf))))
+        for c in prepared.fitted
+    ]
+    return _rebuilt(prepared, fitted, noise)
 
 
 def _rebuilt(prepared: Prepared, fitted: list[CurveKinematics], noise: NoiseModel) -> Prepared:
