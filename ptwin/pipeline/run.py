@@ -130,7 +130,9 @@ def diagnose_set(
     """The diagnosis stage on a prepared and identified set (``twin``: the hybrid twin, None when not trained).
     Where the set's baselines were too short to measure the noise's correlation, it is measured on the twin's
     residual in contact (``ptwin.data.noise.residual_noise``), or without a twin on the base model's less a
-    polynomial per curve (``FLEXIBLE_DEGREE``), and the base model refitted under it."""
+    polynomial per curve (``FLEXIBLE_DEGREE``), and the base model refitted under it. Where they measured it, a
+    reading above what the fitted models' residuals show is capped (``_capped_by_residuals``) and the diagnosis
+    runs again under the cap."""
     block, base_fit = settings.diagnosis.block, identification.base
     if twin is not None:
         measured = _on_twin_residual(prepared, twin, block)
