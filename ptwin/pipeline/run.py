@@ -219,27 +219,25 @@ def _capped_by_residuals(prepared: Prepared, diagnosis: Diagnosis, block: int) -
     κ² 5.2–40 from the baselines, 16.7–24 from the residuals, 15.6 the noise's). A curve's own κ² is capped by
     its own residual's the same way. κ² is then the lesser of the two readings; the ν blocks the tests rest on stay
     the baselines'."""
-    samples = prepared.samples
-    curve, in_contact = samples.curve.cpu().numpy(), samples.in_contact.cpu().numpy()
-    step = float(np.median(np.diff(samples.time.cpu().numpy()[curve == 0])))
-    best, own = None, {}
+    std, best, residuals = prepared.noise.std, None, []
     for terms, candidate in diagnosis.candidates.items():
         if len(terms) > 1 or not candidate.usable:
             continue
-        with torch.no_grad():
-            residual = (candidate.fit.model(samples) - samples.force).cpu().numpy()
-        records = [residual[(curve == i) & in_contact] for i in range(len(samples.curve_ids))]
-        noise = residual_noise(records, prepared.noise.std, step, block, 1, CAPPED)
+        records, step = _contact_records(prepared.samples, candidate.fit.model)
+        noise = residual_noise(records, std, step, block, 1, CAPPED)
         if noise is None:
             continue
+        residuals.append(records)
         if best is None or noise.inflation < best.inflation:
             best = noise
-        for curve_id, record in zip(samples.curve_ids, records):
-            alone = residual_noise([record], prepared.noise.std, step, block, 1, CAPPED)
-            if alone is not None:
-                own[curve_id] = min(own.get(curve_id, np.inf), alone.inflation)
     if best is None or best.inflation >= prepared.noise.inflation:
         return None
+    own = {}  # each curve's least κ² over the residuals
+    for records in residuals:
+        for curve_id, record in zip(prepared.samples.curve_ids, records):
+            alone = residual_noise([record], std, step, block, 1, CAPPED)
+            if alone is not None:
+                own[curve_id] = min(own.get(curve_id, np.inf), alone.inflation)
     noise = replace(
         prepared.noise,
         share=best.share,
@@ -271,13 +269,17 @@ def _residual_noise(
     own κ² for the whiteness test)."""
     if not rests_on_short_records(prepared.noise):
         return None
-    samples = prepared.samples
+    records, step = _contact_records(prepared.samples, predict)
+    return residual_noise(records, prepared.noise.std, step, block, degree, source)
+
+
+def _contact_records(samples: Samples, predict: Callable[[Samples], torch.Tensor]) -> tuple[list[np.ndarray], float]:
+    """(each curve's residual of ``predict`` on its samples in contact [N], the sampling step [s])."""
     with torch.no_grad():
         residual = (predict(samples) - samples.force).cpu().numpy()
     curve, in_contact = samples.curve.cpu().numpy(), samples.in_contact.cpu().numpy()
     records = [residual[(curve == i) & in_contact] for i in range(len(samples.curve_ids))]
-    step = float(np.median(np.diff(samples.time.cpu().numpy()[curve == 0])))
-    return residual_noise(records, prepared.noise.std, step, block, degree, source)
+    return records, float(np.median(np.diff(samples.time.cpu().numpy()[curve == 0])))
 
 
 def candidate_settings(prepared: Prepared, settings: Settings) -> tuple[DiagnosisSettings, list[str]]:
