@@ -175,7 +175,7 @@ def verdict(case: Case, experiment: Experiment, d: dict) -> bool:
         return not named
     if not case.identifiable:  # nothing claimed, or the right name with weak confidence
         return not named or (named == expected and all(e["confidence"] == "weak" for e in d["left_out"]))
-    k = d["permeability"]["corrected"] / experiment.permeability - 1
+    k = relative_error(d["permeability"]["corrected"], experiment.permeability)
     if named == expected:
         return abs(k) <= 0.05 and parameters_within(case, d)
     low, high = d["permeability"]["corrected_interval"]
@@ -184,6 +184,11 @@ def verdict(case: Case, experiment: Experiment, d: dict) -> bool:
     weak = all(entry["confidence"] == "weak" for entry in d["left_out"])
     proposed = not case.proposes or any("next_experiment" in g for g in groups)
     return weak and set(expected) <= {n for g in groups for n in g["terms"]} | set(named) and covers and proposed
+
+
+def relative_error(permeability: float | None, truth: float) -> float:
+    """K's error relative to the truth; infinite where the diagnosis gives no K (its fit left no fluid force)."""
+    return math.inf if permeability is None else permeability / truth - 1
 
 
 def parameters_within(case: Case, d: dict) -> bool:
@@ -210,8 +215,8 @@ def row(case: Case, experiment: Experiment, d: dict, seconds: float) -> tuple:
         " + ".join(t for t in case.effects) or "-",
         named or "-",
         confounded,
-        100 * (d["permeability"]["base"] / truth - 1),
-        100 * (d["permeability"]["corrected"] / truth - 1),
+        100 * relative_error(d["permeability"]["base"], truth),
+        100 * relative_error(d["permeability"]["corrected"], truth),
         covers,
         seconds,
         "right" if verdict(case, experiment, d) else "WRONG",
@@ -295,7 +300,7 @@ def closed(case: Case, experiment: Experiment, d: dict) -> bool:
     """The concealed terms named, each strong, with K within 5%."""
     named = sorted(e["term"] for e in d["left_out"])
     strong = all(e["confidence"] == "strong" for e in d["left_out"])
-    k_error = abs(d["permeability"]["corrected"] / experiment.permeability - 1)
+    k_error = abs(relative_error(d["permeability"]["corrected"], experiment.permeability))
     return named == sorted(case.effects) and strong and k_error <= 0.05
 
 
@@ -308,8 +313,8 @@ def loop_row(case: Case, experiment: Experiment, folder: Path, overrides: list[s
         rounds += 1
         after, more = diagnose(replace(experiment, holds=holds), folder / f"r{rounds}", overrides)
         seconds += more
-    k_before = 100 * (before["permeability"]["corrected"] / experiment.permeability - 1)
-    k_after = 100 * (after["permeability"]["corrected"] / experiment.permeability - 1)
+    k_before = 100 * relative_error(before["permeability"]["corrected"], experiment.permeability)
+    k_after = 100 * relative_error(after["permeability"]["corrected"], experiment.permeability)
     return (
         case.name,
         "; ".join(" ~ ".join(g["terms"]) for g in before["confounded"]) or "-",

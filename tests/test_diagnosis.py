@@ -594,6 +594,58 @@ def test_an_unexplained_k_that_ran_past_the_field_is_said_as_that_limit():
     assert permeability_words(2.9e-16) == "2.9e-16 m²"
 
 
+def test_diagnosis_json_gives_no_value_for_a_k_run_to_the_field_s_limit():
+    # Real PAAm F as recorded: the corrected K ran to 1.03e-6 m², past the field's 1e-9 (no fluid force), beside
+    # structure no term explains, and diagnosis.json gave it as a number; real agarose B's base model 1.58e-9 m².
+    from types import SimpleNamespace
+
+    from ptwin.diagnosis.diagnose import Diagnosis
+
+    def written(base, corrected, interval, rivals=None):
+        noise = SimpleNamespace(std=1e-11, correlation_time=0.0, source="pre-contact baseline", inflation=1.0)
+        permeability = {"base": base, "corrected": corrected, "corrected_std": None, "corrected_interval": interval}
+        groups = [{"terms": ["base model", "a"], "tell_apart": "a hold", "permeability": rivals or {}}]
+        d = Diagnosis(False, "", [], ("a",), {}, [], [], groups, True, {}, {}, noise, permeability)
+        payload = d.to_json()
+        return payload["permeability"], payload["confounded"][0]["permeability"], d.permeability
+
+    paam_f, _, fitted = written(9.5e-10, 1.03e-6, [None, None])
+    assert paam_f["base"] == 9.5e-10 and paam_f["corrected"] is None and fitted["corrected"] == 1.03e-6
+    agarose_b, rivals, _ = written(1.58e-9, 1.58e-9, [None, None], {"base model": 1.58e-9, "a": 2.7e-15})
+    assert agarose_b["base"] is None and agarose_b["corrected"] is None
+    assert rivals == {"base model": None, "a": 2.7e-15}
+    # A K bounded on one side keeps its value beside the interval that says so (the words give the bound alone).
+    bounded, _, _ = written(4.7e-12, 4.7e-12, [7.0e-13, None])
+    assert bounded["corrected"] == 4.7e-12 and bounded["corrected_interval"] == [7.0e-13, None]
+
+
+def test_the_report_says_where_a_k_left_null_sits():
+    # Real agarose B as recorded: base and corrected K at 1.58e-9 m², no fluid force, beside unexplained structure.
+    # diagnosis.json leaves both null; the report's words come from the fits.
+    from ptwin.reporting.report import _fit, print_summary
+
+    noise = {"std": 1.3e-11, "correlation_time": 0.0, "source": "pre-contact baseline", "inflation": 1.0}
+    payload = {
+        "noise": noise,
+        "unexplained": True,
+        "fit": {},
+        "permeability": {"base": None, "corrected": None, "corrected_std": None, "corrected_interval": [None, None]},
+    }
+    fitted = {**payload["permeability"], "base": 1.58e-9, "corrected": 1.58e-9}
+    (line,) = [line for line in _fit(payload, fitted) if line.startswith("Permeability")]
+    limit = "at the field's 1e-09 m² limit or beyond: no fluid force"
+    assert line.startswith(f"Permeability: base {limit}, corrected {limit} (")
+    bounded = {**payload, "unexplained": False}
+    bounded["permeability"] = {**payload["permeability"], "corrected_interval": [7.25e-14, None]}
+    (line,) = [line for line in _fit(bounded, fitted) if line.startswith("Permeability")]
+    assert line.endswith("corrected > 7.25e-14 m² (95%; the data set no upper limit).")
+    printed = []
+    payload["fit"] = {"corrected": {"val_rmse": 3e-11, "test_rmse": 3e-11}}
+    payload["mismatch"] = {"summary": "…"}
+    print_summary({"stages": {}, "noise_floor": 1.3e-11}, payload, printed.append, fitted)
+    assert "diagnosis: corrected" in printed[1] and "no fluid force: ≥ 1e-09" in printed[1]
+
+
 def test_the_printed_table_gives_k_s_interval_where_rivals_leave_it_no_std():
     from ptwin.reporting.report import print_summary
 

@@ -122,8 +122,8 @@ def test_other_terms_the_recordings_name_as_they_are_are_said_to_be_theirs():
 
     def outcome(*named):
         left_out = [{"term": term, "confidence": "moderate"} for term in named]
-        diagnosis = {"left_out": left_out, "unexplained": False, "permeability": {"base": 2e-16}}
-        return RunResult({}, {**diagnosis, "notes": [], "confounded": []}, {}, {"solid_viscosity": {"gamma": -248.0}})
+        diagnosis = {"left_out": left_out, "unexplained": False, "notes": [], "confounded": []}
+        return RunResult({}, diagnosis, {}, {"solid_viscosity": {"gamma": -248.0}}, 2e-16)
 
     recorded = outcome("solid_relaxation", "power_law_rheology")
     both = _trial(1.0, 4.57, 64.0, recorded, "solid_viscosity", "gamma", recorded)

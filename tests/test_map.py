@@ -156,6 +156,32 @@ def test_a_spot_s_verdict_names_what_it_named_beside_what_is_unexplained(left_ou
     assert verdict(row) == said
 
 
+def test_spots_left_without_fluid_force_are_counted_apart_from_k_s_spread():
+    # A map of real agarose spots: K ran to the field's limit (no fluid force) at two of them. Their run-off values
+    # (1.6e-9 and 1.4e-9 m², one PAAm spot 1.03e-6) were K's median and spread, and the top of the K map's scale.
+    from ptwin.diagnosis.spatial import summarise_map
+
+    table = pd.DataFrame(
+        {
+            "spot": ["a", "b", "c", "d"],
+            "x": [0.0, 1e-6, 0.0, 1e-6],
+            "y": [0.0, 0.0, 1e-6, 1e-6],
+            "status": ["ok", "ok", "ok", "its meta.yaml is broken"],
+            "permeability": [2e-16, np.nan, 4e-16, np.nan],
+            "effective_modulus": [1e4, 1e4, 1e4, np.nan],
+            "left_out": ["", "", "", ""],
+            "confidence": ["", "", "", ""],
+            "unexplained": [False, True, False, False],
+        }
+    )
+    summary = summarise_map(table)
+    assert summary["permeability"]["median"] == pytest.approx(3e-16)
+    assert any(
+        sentence.startswith("At 1 of 3 diagnosed spots the fit left no fluid force")
+        for sentence in summary["sentences"]
+    )
+
+
 def test_regions_are_edge_connected_groups_largest_first():
     #   y=2  . x x
     #   y=1  x . x

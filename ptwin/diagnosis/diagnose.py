@@ -39,7 +39,7 @@ from ptwin.fitting.physics_fit import PhysicsFit, rmse
 from ptwin.fitting.pointwise import ApparentPermeability
 from ptwin.fitting.split import Split
 from ptwin.physics.elastic import ReferenceCurve
-from ptwin.physics.model import PERMEABILITY, PLAUSIBLE_PERMEABILITY, smooth_contact_radius
+from ptwin.physics.model import PERMEABILITY, PLAUSIBLE_PERMEABILITY, fluid_off, smooth_contact_radius
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
@@ -76,6 +76,14 @@ class DiagnosisSettings:
             )
 
 
+def measured(permeability: float | None) -> float | None:
+    """K [m²] as the data give it: None where the fit ran it to the field's top (``fluid_off``), where no fluid
+    force is left and any larger K fits as well, so the value is wherever the fit stopped (real PAAm F: 1.03e-6
+    m², past the field's 1e-9; agarose B's base model 1.58e-9). The interval gives the bound the data set, if
+    any, and the words say the limit."""
+    return None if permeability is None or fluid_off(permeability) else permeability
+
+
 @dataclass
 class Diagnosis:
     detected: bool
@@ -90,7 +98,7 @@ class Diagnosis:
     whiteness: dict[str, float]  # base / corrected, in units of the noise model
     fit: dict[str, dict[str, float]]  # base / corrected / hybrid → val_rmse, test_rmse [N]
     noise: NoiseModel
-    permeability: dict  # base, corrected, corrected_std, corrected_interval [m²]
+    permeability: dict  # base, corrected, corrected_std, corrected_interval [m²], as the fits found them
     notes: list[str] = field(default_factory=list)
     predictions: list[Prediction] = field(default_factory=list)  # of each proposed next experiment
     evidence: dict[str, TermEvidence] = field(default_factory=dict)  # of each usable subset over the base model
@@ -107,9 +115,17 @@ class Diagnosis:
     def noise_floor(self) -> float:
         return self.noise.std
 
+    @property
+    def measured_permeability(self) -> dict:
+        """``permeability`` as diagnosis.json gives it: a K whose fit left no fluid force is null (``measured``).
+        A K whose interval is open on a side stays, beside that interval: the bound is the interval's, and the
+        words give only the bound."""
+        p = self.permeability
+        return {**p, "base": measured(p["base"]), "corrected": measured(p["corrected"])}
+
     def to_json(self) -> dict:
         """``diagnosis.json`` as shared/physics-terms.md v2 specifies (plus ``notes``); every number
-        that could not be determined is null."""
+        that could not be determined is null, a K run to the field's limit too (``measured``)."""
         where = [
             {
                 "curve": m.curve,
@@ -124,10 +140,13 @@ class Diagnosis:
             "format": FORMAT,
             "mismatch": {"detected": self.detected, "summary": self.summary, "where": where},
             "left_out": self.left_out,
-            "confounded": self.confounded,
+            "confounded": [
+                {**group, "permeability": {name: measured(k) for name, k in group["permeability"].items()}}
+                for group in self.confounded
+            ],
             "rejected": self.rejected,
             "unexplained": self.unexplained,
-            "permeability": self.permeability,
+            "permeability": self.measured_permeability,
             "noise_floor": self.noise.std,
             "noise": {
                 "std": self.noise.std,

@@ -55,7 +55,8 @@ def regions(named: np.ndarray, column: np.ndarray, row: np.ndarray) -> list[np.n
 
 def summarise_map(table: pd.DataFrame) -> dict:
     """``map_summary.json``: the spots' verdicts counted, K and E* over the diagnosed spots (median and the
-    spread between the 16th and 84th percentiles), and for each named term where it holds."""
+    spread between the 16th and 84th percentiles; K over the spots that have one), and for each named term where
+    it holds."""
     ok = table[table["status"] == "ok"]
     verdicts = table.apply(verdict, axis=1)
     summary = {
@@ -70,6 +71,13 @@ def summarise_map(table: pd.DataFrame) -> dict:
     if len(ok) < len(table):
         summary["sentences"].append(
             f"{len(table) - len(ok)} of {len(table)} spots could not be diagnosed; spots.csv gives each one's reason."
+        )
+    without = int(ok["permeability"].isna().sum())
+    if without:
+        summary["sentences"].append(
+            f"At {without} of {len(ok)} diagnosed spots the fit left no fluid force, so any larger K fits as well: "
+            "they give no K (spots.csv gives the lower bound the data set, where they set one), and K's median and "
+            "spread are over the other spots."
         )
     place = grid(table)
     terms = sorted({t for names in ok["left_out"] for t in names.split(";") if t})  # named at any confidence

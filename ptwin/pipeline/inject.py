@@ -425,7 +425,7 @@ def _trial(
     """The ``Trial`` of one diagnosis (``outcome``); ``as_recorded``: that of the recordings as they are, where
     ``outcome`` is one with the term added."""
     diagnosis, candidate = outcome.diagnosis, term in outcome.candidates
-    unexplained, permeability = diagnosis["unexplained"], diagnosis["permeability"]["base"]
+    unexplained, permeability = diagnosis["unexplained"], outcome.base_permeability
     named = [e for e in diagnosis["left_out"] if e["term"] != term]
     others = tuple(f"{e['term']} ({e['confidence']})" for e in named)
     before = set() if as_recorded is None else {e["term"] for e in as_recorded.diagnosis["left_out"]}

@@ -66,6 +66,8 @@ class RunResult:
     figures: dict  # {name: matplotlib figure}, each saved as name.png
     candidates: dict[str, dict[str, float] | None]  # each term the diagnosis fitted → its values fitted alone
     # (None: that fit failed); the others were no candidates for this set
+    base_permeability: float | None = None  # the diagnosis's base model's K as its fit found it [m²] (diagnosis.json
+    # leaves a K without fluid force null; its words need the value)
 
 
 def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = print) -> RunResult:
@@ -108,10 +110,10 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     images = {name: figure_file(output_dir, name) for name in figures}
     log.close(images, hparams, {"hparam/val_rmse": hybrid["val_rmse"], "hparam/test_rmse": hybrid["test_rmse"]})
     payload = write_outputs(output_dir, results, diagnosis, figures)
-    print_summary(results, payload, progress)
+    print_summary(results, payload, progress, diagnosis.permeability)
     progress(f"results in {output_dir} ({results['seconds']:.1f} s)")
     tried = {term: _alone(diagnosis, term) for term in VOCABULARY if any(term in key for key in diagnosis.candidates)}
-    return RunResult(results, payload, figures, tried)
+    return RunResult(results, payload, figures, tried, diagnosis.permeability["base"])
 
 
 def _alone(diagnosis: Diagnosis, term: str) -> dict[str, float] | None:

@@ -116,11 +116,13 @@ def _diagnosis(settings: Settings, hybrid: bool, output_dir: Path) -> Diagnosis:
 
 
 def _row(d: Diagnosis) -> dict:
-    """The columns a diagnosis fills: K and its 95% interval [m²], E* [Pa], what was named and how surely,
+    """The columns a diagnosis fills: K as diagnosis.json gives it (none where no fluid force was left) and its
+    95% interval [m²], E* [Pa], what was named and how surely,
     and the validation RMS of the base and corrected models in units of the noise std."""
-    low, high = d.permeability["corrected_interval"]
+    permeability = d.measured_permeability
+    low, high = permeability["corrected_interval"]
     return {
-        "permeability": d.permeability["corrected"],
+        "permeability": permeability["corrected"],
         "permeability_low": low,
         "permeability_high": high,
         "effective_modulus": d.corrected.fit.model.hertz_modulus(),

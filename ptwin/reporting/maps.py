@@ -18,6 +18,7 @@ from ptwin.diagnosis.spatial import FAILED, grid, verdict  # noqa: E402
 from ptwin.reporting.figures import tight  # noqa: E402
 
 MICRO = 1e6
+NOT_DIAGNOSED = "spot not diagnosed"
 
 
 def write_map_outputs(output_dir: Path, table: pd.DataFrame, summary: dict) -> None:
@@ -25,7 +26,12 @@ def write_map_outputs(output_dir: Path, table: pd.DataFrame, summary: dict) -> N
     table.to_csv(output_dir / "spots.csv", index=False, float_format="%.9g")
     (output_dir / "map_summary.json").write_text(json.dumps(summary, indent=2))
     figures = {
-        "map_permeability": _map(table, np.log10(table["permeability"].astype(float)), "log10 K [m²]"),
+        "map_permeability": _map(
+            table,
+            np.log10(table["permeability"].astype(float)),
+            "log10 K [m²]",
+            f"{NOT_DIAGNOSED}, or no fluid force left there",
+        ),
         "map_verdict": _verdict_map(table),
         "map_base_rmse": _map(table, table["base_rmse_over_noise"].astype(float), "base model RMS / noise std"),
     }
@@ -58,14 +64,15 @@ def _axes(extent, title: str):
     return figure, ax
 
 
-def _map(table: pd.DataFrame, values: pd.Series, label: str):
+def _map(table: pd.DataFrame, values: pd.Series, label: str, blank: str = NOT_DIAGNOSED):
+    """``values`` of each spot on the map's grid; ``blank``: what a spot without a value is."""
     column, row, extent = _layout(table)
     image = np.full((row.max() + 1, column.max() + 1), np.nan)
     image[row, column] = values.to_numpy()
     figure, ax = _axes(extent, label)
     shown = ax.imshow(image, origin="lower", extent=extent, cmap="viridis", interpolation="nearest")
     figure.colorbar(shown, ax=ax, label=label)
-    ax.text(0.01, -0.16, "blank: spot not diagnosed", transform=ax.transAxes, fontsize=8)
+    ax.text(0.01, -0.16, f"blank: {blank}", transform=ax.transAxes, fontsize=8)
     tight(figure)
     return figure
 

@@ -50,13 +50,14 @@ def summary_rows(results: dict) -> list[tuple[str, str, str, str]]:
     return rows
 
 
-def print_summary(results: dict, diagnosis: dict, progress=print) -> None:
-    """The identification chain and the diagnosis's K as a table, and its summary sentence."""
+def print_summary(results: dict, diagnosis: dict, progress=print, fitted: dict | None = None) -> None:
+    """The identification chain and the diagnosis's K as a table, and its summary sentence. ``fitted``: K as the
+    fits found it, which says where a K diagnosis.json leaves null sits (default: diagnosis.json's)."""
     rows = summary_rows(results)
     fit = diagnosis["fit"]["corrected"]
     permeability = diagnosis["permeability"]
     low, high = permeability["corrected_interval"]
-    corrected = _k(permeability["corrected"], permeability["corrected_std"])
+    corrected = _k((fitted or permeability)["corrected"], permeability["corrected_std"])
     if one_sided((low, high)):  # the bound is all the data say
         corrected = f"< {high:.4g}" if low is None else f"> {low:.4g}"
     elif permeability["corrected_std"] is None and low is not None:  # rivals widened it: the interval, no std
@@ -78,7 +79,7 @@ def write_report(output_dir: Path, results: dict, payload: dict, diagnosis, figu
     if diagnosis is not None:
         lines += [*(f"- {note}" for note in payload["notes"]), ""]
         lines += _candidates(diagnosis)
-    lines += _fit(payload) + _chain(results)
+    lines += _fit(payload, payload["permeability"] if diagnosis is None else diagnosis.permeability) + _chain(results)
     lines += ["## Figures", "", *(f"![{name}]({name}.png)" for name in figures)]
     (output_dir / "report.md").write_text("\n".join(lines) + "\n")
 
@@ -155,8 +156,10 @@ def _candidates(diagnosis) -> list[str]:
     return [*lines, ""]
 
 
-def _fit(payload: dict) -> list[str]:
-    noise, p = payload["noise"], payload["permeability"]
+def _fit(payload: dict, fitted: dict) -> list[str]:
+    """The noise model, K and the fits' RMS. ``fitted``: K as the fits found it, whose words say where a K the
+    payload leaves null sits (the field's limit, no fluid force)."""
+    noise = payload["noise"]
     time = noise["correlation_time"]
     correlation = number(None if time is None else time * 1e3, ".2g")
     lines = [
@@ -165,7 +168,7 @@ def _fit(payload: dict) -> list[str]:
         f"Noise: std {_nano(noise['std'])} nN, correlation time {correlation} ms, block-variance inflation "
         f"{number(noise['inflation'], '.2f')} (from the {noise['source']}); every statistic above uses it.",
         "",
-        f"Permeability: base {permeability_words(p['base'], '.4g')}, corrected {_corrected_k(payload)}.",
+        f"Permeability: base {permeability_words(fitted['base'], '.4g')}, corrected {_corrected_k(payload, fitted)}.",
         "",
         "| model | val RMSE [nN] | test RMSE [nN] | test / noise std |",
         "|---|---|---|---|",
@@ -176,11 +179,12 @@ def _fit(payload: dict) -> list[str]:
     return [*lines, ""]
 
 
-def _corrected_k(payload: dict) -> str:
-    """The corrected K as the data fix it; none from a model that leaves the data unexplained."""
+def _corrected_k(payload: dict, fitted: dict) -> str:
+    """The corrected K as the data fix it; none from a model that leaves the data unexplained (``fitted``: as
+    its fit found it)."""
     p = payload["permeability"]
     if payload["unexplained"]:
-        return f"{permeability_words(p['corrected'], '.4g')} ({MISSES_DATA})"
+        return f"{permeability_words(fitted['corrected'], '.4g')} ({MISSES_DATA})"
     return bounded(p["corrected"], p["corrected_interval"], ".4g", " m²")
 
 
