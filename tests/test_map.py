@@ -157,8 +157,8 @@ def test_a_spot_s_verdict_names_what_it_named_beside_what_is_unexplained(left_ou
 
 
 def test_spots_left_without_fluid_force_are_counted_apart_from_k_s_spread():
-    # A map of real agarose spots: K ran to the field's limit (no fluid force) at two of them. Their run-off values
-    # (1.6e-9 and 1.4e-9 m², one PAAm spot 1.03e-6) were K's median and spread, and the top of the K map's scale.
+    # A map of the 13 real PAAm and agarose sets: K ran to the field's limit (no fluid force) at four of them. Their
+    # run-off values (1.4e-9 to 1.03e-6 m²) were in K's median and spread, and at the top of the K map's scale.
     from ptwin.diagnosis.spatial import summarise_map
 
     table = pd.DataFrame(
