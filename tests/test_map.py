@@ -182,6 +182,16 @@ def test_spots_left_without_fluid_force_are_counted_apart_from_k_s_spread():
     )
 
 
+def test_a_spot_result_of_another_format_is_run_again(tmp_path):
+    # Spot results of ptwin-spot/1 gave a K without fluid force as a value; a map resumed over them would mix both.
+    from ptwin.pipeline.forcemap import FORMAT, _stored_row
+
+    stored = tmp_path / "spot.json"
+    for form, kept in (("ptwin-spot/1", False), (FORMAT, True)):
+        stored.write_text(json.dumps({"format": form, "settings": "abc", "row": {"spot": "a"}}))
+        assert (_stored_row(stored, "abc") is not None) == kept
+
+
 def test_regions_are_edge_connected_groups_largest_first():
     #   y=2  . x x
     #   y=1  x . x

@@ -21,7 +21,9 @@ from ptwin.pipeline.settings import MapRunSettings, Settings
 from ptwin.pipeline.spot import COLUMNS, RESULTS, Spot, blank_row, diagnose_spot, position_of, result_path
 from ptwin.reporting.maps import write_map_outputs
 
-FORMAT = "ptwin-spot/1"
+# A spot result stored under another format is run again: /2 leaves blank a K whose fit left no fluid force, where
+# /1 gave the value the fit stopped at (a map resumed across the change would have mixed the two).
+FORMAT = "ptwin-spot/2"
 
 
 @dataclass
