@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ptwin.diagnosis.diagnose import Diagnosis
 from ptwin.diagnosis.words import MISSES_DATA, bounded, number, one_sided, permeability_words
 from ptwin.physics.model import PLAUSIBLE_PERMEABILITY, fluid_off
 
@@ -71,15 +72,14 @@ def print_summary(results: dict, diagnosis: dict, progress=print, fitted: dict |
     progress(f"diagnosis: {diagnosis['mismatch']['summary']}")
 
 
-def write_report(output_dir: Path, results: dict, payload: dict, diagnosis, figures: dict) -> None:
+def write_report(output_dir: Path, results: dict, payload: dict, diagnosis: Diagnosis, figures: dict) -> None:
     """report.md: the diagnosis in sentences and tables, the figures embedded."""
     lines = ["# ptwin report", "", f"Recordings: `{results['recordings']}`", "", "## Diagnosis", ""]
     lines += [payload["mismatch"]["summary"], ""]
     lines += _where(payload) + _left_out(payload) + _others(payload)
-    if diagnosis is not None:
-        lines += [*(f"- {note}" for note in payload["notes"]), ""]
-        lines += _candidates(diagnosis)
-    lines += _fit(payload, payload["permeability"] if diagnosis is None else diagnosis.permeability) + _chain(results)
+    lines += [*(f"- {note}" for note in payload["notes"]), ""]
+    lines += _candidates(diagnosis)
+    lines += _fit(payload, diagnosis.permeability) + _chain(results)
     lines += ["## Figures", "", *(f"![{name}]({name}.png)" for name in figures)]
     (output_dir / "report.md").write_text("\n".join(lines) + "\n")
 
