@@ -101,6 +101,7 @@ def candidate(terms, chi_square, val_rmse, violations=None, whiteness=1.0, resid
     fit = PhysicsFit(
         terms, 3e-16, 3e-17, params, params, params, violations or {}, chi_square, 1000, 1, None, 1 + len(terms)
     )
+    fit.chi_square_without = {t: math.inf for t in terms}  # no subset one term smaller is refitted from it
     return Candidate(terms, fit, val_rmse, whiteness, residual=residual)
 
 
@@ -271,6 +272,45 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     assert sum(len(t) == largest for t in fitted) == {1: 3, 2: 3, 3: 1}[largest]
     # the base model fitted first, every subset with terms given it (where it starts: ``fit_with_starts``)
     assert starts[0] is None and all(base is not None and base.terms == () for base in starts[1:])
+
+
+def test_fits_that_do_not_nest_are_fitted_again_from_their_neighbours_optimum(monkeypatch):
+    # The pair's starts found a basin b alone missed (b costs 1600 at the pair's optimum with a taken out, its own
+    # fit 1950) and missed the one a alone found (the pair 1960, a alone 1900): b is refitted from the pair, then
+    # the pair from each single, each fit from a neighbour's optimum ending 10 below where it starts.
+    import ptwin.diagnosis.name as name
+
+    chi_square = {(): 2000.0, ("a",): 1900.0, ("b",): 1950.0, ("a", "b"): 1960.0}
+    refits = []
+
+    def fake(subset, chi, without=None):
+        fit = candidate(subset, chi, 1.0).fit
+        fit.model = lambda samples: samples.force + len(subset)  # its residual tells its size
+        fit.chi_square_without = without or {t: chi + 1e3 for t in subset}
+        return fit
+
+    def fit_with_starts(make_model, subset, samples, index, iterations, base=None):
+        return fake(subset, chi_square[subset], {"a": 1600.0, "b": 1990.0} if len(subset) == 2 else None)
+
+    def fit_from(make_model, subset, start, samples, index, iterations, reference_free):
+        refits.append((subset, start.terms))
+        if len(subset) > len(start.terms):
+            return fake(subset, start.chi_square - 10.0)
+        (taken_out,) = set(start.terms) - set(subset)
+        return fake(subset, start.chi_square_without[taken_out] - 10.0)
+
+    monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
+    monkeypatch.setattr(name, "fit_from", fit_from)
+    monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: 50.0)
+    samples, split = ten_samples()
+    candidates = name.fit_candidates(None, samples, split, ["a", "b"], 2, 1, 50, ABOVE_FIVE, progress=lambda _: None)
+    assert refits == [(("b",), ("a", "b")), (("a", "b"), ("a",)), (("a", "b"), ("b",))]
+    assert {t: c.fit.chi_square for t, c in candidates.items()} == {
+        (): 2000.0,
+        ("a",): 1900.0,
+        ("b",): 1590.0,
+        ("a", "b"): 1580.0,
+    }
 
 
 @pytest.mark.parametrize(("base_whiteness", "largest"), [(2.0, 1), (50.0, 2)])

@@ -84,8 +84,10 @@ def test_strain_dependent_permeability_on_a_soft_set_is_reported_honestly(tmp_pa
 
 
 def test_a_candidate_that_cannot_be_fitted_is_listed_not_fatal(tmp_path, coarse_cache, monkeypatch):
-    # Every start of contact_offset puts the depth beyond the sample: the fluid layer refuses it.
+    # Every start of contact_offset, and the value a neighbour's optimum gives it where it is absent (the fits'
+    # nesting, ``diagnosis.name._nest``), puts the depth beyond the sample: the fluid layer refuses it.
     monkeypatch.setattr(VOCABULARY["contact_offset"], "STARTS", [{"delta": -1.0}])
+    monkeypatch.setattr(VOCABULARY["contact_offset"], "absent_values", classmethod(lambda cls: {"delta": -1.0}))
     from tests.conftest import simulated_set
 
     folder = simulated_set(tmp_path / "set", base_speeds=(0.5e-6, 20e-6, 80e-6), samples=300)

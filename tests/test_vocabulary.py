@@ -70,7 +70,10 @@ def test_the_permeabilities_a_term_starts_from_follow_its_hooks_and_its_contact_
 
     monkeypatch.setattr(physics_fit, "cheapest", lambda models, samples, index: list(models)[-1])
     monkeypatch.setattr(physics_fit, "fit_physics", fit_physics)
-    fluid_off, base = physics_fit.PLAUSIBLE_PERMEABILITY[1], SimpleNamespace(permeability=3e-16, reference_free=None)
+    fluid_off, base = (
+        physics_fit.PLAUSIBLE_PERMEABILITY[1],
+        SimpleNamespace(permeability=3e-16, params={}, reference_free=None),
+    )
     for terms, starts in (
         (("pore_pressure_relaxation",), [None]),
         (("pore_pressure_relaxation", "strain_dependent_permeability"), [None]),
@@ -111,7 +114,7 @@ def test_a_physical_fit_is_kept_over_a_non_physical_one_of_lower_chi_square(monk
     base = SimpleNamespace(permeability=6.4e-16, model=None, reference_free=None)
     fits = iter([(3843.8, False), (3875.7, True), (19719.0, True), (4631.7, True)])  # in the order of the starts
     monkeypatch.setattr(physics_fit, "cheapest", lambda models, samples, index: list(models)[-1])
-    monkeypatch.setattr(physics_fit, "_nested", lambda make_model, terms, base: "nested")
+    monkeypatch.setattr(physics_fit, "started_at", lambda make_model, terms, start: "nested")
 
     def fit_physics(model, *rest, **options):
         chi_square, physical = next(fits)
@@ -122,3 +125,29 @@ def test_a_physical_fit_is_kept_over_a_non_physical_one_of_lower_chi_square(monk
     assert physics_fit.fit_with_starts(make_model, ("solid_viscosity",), 0, 0, base=base).chi_square == 3875.7
     fits = iter([(3843.8, False), (3875.7, False), (19719.0, False), (4631.7, False)])  # none physical
     assert physics_fit.fit_with_starts(make_model, ("solid_viscosity",), 0, 0, base=base).chi_square == 3843.8
+
+
+def test_a_model_started_at_a_neighbours_optimum_costs_what_the_neighbour_does_there(tmp_path, coarse_cache):
+    # Each term at ``Term.absent_values`` does nothing: the model one term larger, started at a smaller one's
+    # optimum (``started_at``), costs that model's χ², and its fit ends no higher (``fit_from``). Back the other way,
+    # the smaller model started at the larger one's optimum costs the larger one's χ² with the term taken out
+    # (``PhysicsFit.chi_square_without``). What ``diagnosis.name._nest`` relies on to make the candidates nest.
+    from ptwin.fitting.physics_fit import fit_from, fit_physics, scaled_residual, started_at
+    from ptwin.pipeline.prepare import prepare
+    from tests.conftest import settings_for
+
+    folder = simulated_set(tmp_path / "set", effects={"solid_relaxation": {"g": 0.3, "tau": 0.05}})
+    p = prepare(settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda _: None)
+
+    def cost(model):
+        vector, residual = scaled_residual(model, p.samples, p.split.train)
+        return residual(vector.get()).square().sum().item()
+
+    base = fit_physics(p.make_model(), p.samples, p.split.train)
+    for term in VOCABULARY:
+        assert cost(started_at(p.make_model, (term,), base)) == pytest.approx(base.chi_square, rel=1e-9), term
+    larger = fit_from(p.make_model, ("solid_relaxation",), base, p.samples, p.split.train, 30, None)
+    assert larger.chi_square < 0.5 * base.chi_square  # the relaxation concealed: the fit moved
+    taken_out = larger.chi_square_without["solid_relaxation"]
+    assert cost(started_at(p.make_model, (), larger)) == pytest.approx(taken_out, rel=1e-12)
+    assert fit_from(p.make_model, (), larger, p.samples, p.split.train, 30, None).chi_square <= taken_out

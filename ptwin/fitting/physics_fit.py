@@ -55,6 +55,8 @@ class PhysicsFit:
     implausible: dict[str, str] = field(default_factory=dict)  # term → which values are outside the field's
     # The reference's contact correction fitted (True) or held (False); None: no correction (known contacts).
     reference_free: bool | None = None
+    # term → χ² with that term taken out, the rest as fitted: the cost of the model one term smaller, here
+    chi_square_without: dict[str, float] = field(default_factory=dict)
 
     @property
     def effective_samples(self) -> float:
@@ -134,16 +136,14 @@ def fit_physics(
     raw_std = dict(zip(vector.names, std.tolist()))
     raw_corr = dict(zip(vector.names, correlation[vector.names.index(PERMEABILITY)].tolist()))
     permeability = model.fluid.permeability.item()
-    params, param_std, corr, violations, degenerate, implausible = {}, {}, {}, {}, {}, {}
+    params, param_std, corr, violations, degenerate, implausible, without = {}, {}, {}, {}, {}, {}, {}
     for name, term in model.terms.items():
         params[name] = term.values()
         raw = {p: f"terms.{name}.{term.raw_name(p)}" for p in term.PARAMS}
         param_std[name] = term.physical_std({term.raw_name(p): raw_std.get(key, 0.0) for p, key in raw.items()})
         corr[name] = {p: raw_corr.get(key, 0.0) for p, key in raw.items()}
-        for found, reason in (
-            (violations, term.violation()),
-            (degenerate, _without_effect(model, name, samples, index)),
-        ):
+        nothing, without[name] = _without_term(model, name, samples, index)
+        for found, reason in ((violations, term.violation()), (degenerate, nothing)):
             if reason:
                 found[name] = reason
         if term.implausible():
@@ -170,6 +170,7 @@ def fit_physics(
         inflation=samples.noise_inflation,
         degenerate=degenerate,
         implausible=implausible,
+        chi_square_without=without,
         reference_free=None if model.contact is None else bool(model.contact.reference.requires_grad),
     )
 
@@ -243,12 +244,10 @@ def _tolerated_fall(reference) -> float:
     return max(reference.noise_std, LAW_FALL * float(reference.reference_force.max()))
 
 
-def _without_effect(model: ForceModel, name: str, samples: Samples, index: torch.Tensor) -> str | None:
-    """Why term ``name`` does nothing on ``samples[index]`` at its fitted values, or None: a parameter
-    run off to a limit, or an effect on the fitted forces below one unit of χ² under the noise model."""
-    limit = model.terms[name].degenerate()
-    if limit:
-        return limit
+def _without_term(model: ForceModel, name: str, samples: Samples, index: torch.Tensor) -> tuple[str | None, float]:
+    """(why term ``name`` does nothing on ``samples[index]`` at its fitted values, or None; the χ² there with the
+    term taken out and the rest as fitted). It does nothing where a parameter ran off to a limit, or where its
+    effect on the fitted forces is below one unit of χ² under the noise model."""
     terms = model.terms
     model.terms = nn.ModuleDict({other: term for other, term in terms.items() if other != name})
     try:
@@ -256,11 +255,16 @@ def _without_effect(model: ForceModel, name: str, samples: Samples, index: torch
             without = model(samples)
     finally:
         model.terms = terms
+    noise = samples.noise_floor[index]
     with torch.no_grad():
-        change = ((model(samples) - without)[index] / samples.noise_floor[index]).square().sum().item()
+        chi_square = ((without - samples.force)[index] / noise).square().sum().item()
+        change = ((model(samples) - without)[index] / noise).square().sum().item()
+    limit = terms[name].degenerate()
+    if limit:
+        return limit, chi_square
     if change / samples.noise_inflation < 1.0:
-        return "its effect on the fitted curves is below the noise"
-    return None
+        return "its effect on the fitted curves is below the noise", chi_square
+    return None, chi_square
 
 
 def fit_with_starts(
@@ -319,7 +323,7 @@ def fit_with_starts(
 
     models = [at(permeability) for permeability in permeabilities]
     if hidden:
-        models.append(lambda: _nested(make_model, terms, base))
+        models.append(lambda: started_at(make_model, terms, base))
     fits, why = [], None
     for model in models:
         try:
@@ -331,13 +335,32 @@ def fit_with_starts(
     return min(fits, key=lambda fit: (not fit.physical, fit.chi_square))
 
 
-def _nested(make_model, terms: tuple[str, ...], base: PhysicsFit) -> ForceModel:
-    """The model with ``terms`` at their defaults (a viscosity's: zero) and everything else at the base model's
-    optimum: its cost there is the base model's."""
-    model = make_model(terms, None, base.permeability)
+def started_at(make_model, terms: tuple[str, ...], start: PhysicsFit) -> ForceModel:
+    """The model of ``terms`` at ``start``'s optimum: K, the contact corrections and the terms both have at
+    ``start``'s values, a term ``start`` lacks where it does nothing (``Term.absent_values``); a term only
+    ``start`` has is left out. From a smaller model's optimum, its cost is that model's."""
+    values = {t: start.params[t] if t in start.params else VOCABULARY[t].absent_values() for t in terms}
+    model = make_model(terms, values, start.permeability)
     if model.contact is not None:
-        model.contact.load_state_dict(base.model.contact.state_dict())
+        model.contact.load_state_dict(start.model.contact.state_dict())
     return model
+
+
+def fit_from(
+    make_model,
+    terms: tuple[str, ...],
+    start: PhysicsFit,
+    samples: Samples,
+    index: torch.Tensor,
+    iterations: int,
+    reference_free: bool | None,
+) -> PhysicsFit:
+    """``fit_physics`` of the model of ``terms`` from ``start``'s optimum (``started_at``), the reference's contact
+    correction fitted or held as ``reference_free`` says (``fit_physics``). LM accepts only steps that lower the
+    cost: from a smaller model's optimum the fit ends no worse than that model, and from a larger one's no worse
+    than the cost there with the larger one's extra term taken out (``PhysicsFit.chi_square_without``)."""
+    model = started_at(make_model, terms, start)
+    return fit_physics(model, samples, index, iterations, reference_free=reference_free)
 
 
 def cheapest(models: Iterable[ForceModel], samples: Samples, index: torch.Tensor) -> ForceModel:

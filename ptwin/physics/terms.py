@@ -125,6 +125,20 @@ class Term(nn.Module):
     def values(self) -> dict[str, float]:
         return {name: self.value(name).item() for name in self.PARAMS}
 
+    @classmethod
+    def absent_values(cls) -> dict[str, float]:
+        """Values at which the term does nothing: each parameter that can remove it at its ``absent`` value (one
+        that removes it as it grows without bound: ``LIMIT``² beyond the field's range, past where a fit is read as
+        run off to the limit), the others at their defaults."""
+        values = {}
+        for name, parameter in cls.PARAMS.items():
+            absent = parameter.absent
+            if absent is None:
+                values[name] = parameter.default
+            else:
+                values[name] = parameter.plausible[1] * Parameter.LIMIT**2 if math.isinf(absent) else absent
+        return values
+
     def physical_std(self, raw_std: dict[str, float]) -> dict[str, float]:
         """Standard deviations of the physical values from those of the raw parameters (delta method)."""
         return {
