@@ -30,7 +30,7 @@ import torch
 from ptwin.diagnosis.locate import pooled_whiteness
 from ptwin.diagnosis.null import StructureTest, TermEvidence, term_evidence
 from ptwin.fitting.lm import FitError
-from ptwin.fitting.physics_fit import PhysicsFit, fit_from, fit_with_starts
+from ptwin.fitting.physics_fit import PhysicsFit, fit_from, fit_with_starts, kept_first
 from ptwin.fitting.split import Split
 from ptwin.physics.samples import Samples
 
@@ -147,13 +147,17 @@ def _nest(candidates: dict, refit: Callable, add: Callable) -> None:
     missed: refitted from the pair's optimum, the relaxation alone reaches 107. On another, a power law with a
     strain-dependent permeability of m 7e-7 ended at 316, above the power law alone (252) and the base model (301).
     What a term gains over a smaller model must be the term's, so a fit breaking the nesting is fitted again from
-    its neighbour's optimum (``fit_from``: no worse than it) and kept where better (physical first, then χ², as
+    its neighbour's optimum (``fit_from``: no worse than it) and kept where better (``kept_first``, as
     ``fit_with_starts`` keeps its best). Where the fits nest this costs nothing; larger subsets are repaired from
     first, so that a repaired one can repair those below it."""
 
-    def better(new: PhysicsFit | None, old: PhysicsFit | None) -> bool:
-        rank = lambda fit: (not fit.physical, fit.chi_square)  # noqa: E731
-        return new is not None and (old is None or rank(new) < rank(old))
+    def repaired(subset: tuple[str, ...], start: tuple[str, ...], how: str) -> bool:
+        """``subset`` refitted from ``start``'s optimum, kept where better; whether it was."""
+        fit, old = refit(subset, start), candidates[subset].fit
+        if fit is None or (old is not None and kept_first(fit) >= kept_first(old)):
+            return False
+        add(subset, fit, how)
+        return True
 
     def nested_pairs():
         for larger in sorted(candidates, key=len, reverse=True):
@@ -163,7 +167,7 @@ def _nest(candidates: dict, refit: Callable, add: Callable) -> None:
                     yield smaller, larger, term
 
     for _ in range(len(max(candidates, key=len)) + 1):  # a repair can open one more a level down
-        repaired = False
+        changed = False
         for smaller, larger, term in list(nested_pairs()):
             small, large = candidates[smaller].fit, candidates[larger].fit
             if (
@@ -171,10 +175,7 @@ def _nest(candidates: dict, refit: Callable, add: Callable) -> None:
                 and large.physical
                 and (small is None or large.chi_square_without[term] < small.chi_square - NESTED_SLACK)
             ):
-                fit = refit(smaller, larger)
-                if better(fit, small):
-                    add(smaller, fit, f" refitted from {' + '.join(larger)} with {term} taken out")
-                    repaired = True
+                changed |= repaired(smaller, larger, f" refitted from {' + '.join(larger)} with {term} taken out")
         for smaller, larger, term in reversed(list(nested_pairs())):
             small, large = candidates[smaller].fit, candidates[larger].fit
             if (
@@ -182,11 +183,9 @@ def _nest(candidates: dict, refit: Callable, add: Callable) -> None:
                 and small.physical
                 and (large is None or large.chi_square > small.chi_square + NESTED_SLACK)
             ):
-                fit = refit(larger, smaller)
-                if better(fit, large):
-                    add(larger, fit, f" refitted from {' + '.join(smaller) or 'base'} with {term} added")
-                    repaired = True
-        if not repaired:
+                how = f" refitted from {' + '.join(smaller) or 'base'} with {term} added"
+                changed |= repaired(larger, smaller, how)
+        if not changed:
             return
 
 

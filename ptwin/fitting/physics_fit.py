@@ -332,7 +332,12 @@ def fit_with_starts(
             why = error
     if not fits:
         raise why
-    return min(fits, key=lambda fit: (not fit.physical, fit.chi_square))
+    return min(fits, key=kept_first)
+
+
+def kept_first(fit: PhysicsFit) -> tuple[bool, float]:
+    """The order in which fits of one model are kept: physical first, then the least χ²."""
+    return not fit.physical, fit.chi_square
 
 
 def started_at(make_model, terms: tuple[str, ...], start: PhysicsFit) -> ForceModel:
