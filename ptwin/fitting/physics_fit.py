@@ -137,12 +137,14 @@ def fit_physics(
     raw_corr = dict(zip(vector.names, correlation[vector.names.index(PERMEABILITY)].tolist()))
     permeability = model.fluid.permeability.item()
     params, param_std, corr, violations, degenerate, implausible, without = {}, {}, {}, {}, {}, {}, {}
+    with torch.no_grad():
+        fitted = model(samples) if model.terms else None
     for name, term in model.terms.items():
         params[name] = term.values()
         raw = {p: f"terms.{name}.{term.raw_name(p)}" for p in term.PARAMS}
         param_std[name] = term.physical_std({term.raw_name(p): raw_std.get(key, 0.0) for p, key in raw.items()})
         corr[name] = {p: raw_corr.get(key, 0.0) for p, key in raw.items()}
-        nothing, without[name] = _without_term(model, name, samples, index)
+        nothing, without[name] = _without_term(model, fitted, name, samples, index)
         for found, reason in ((violations, term.violation()), (degenerate, nothing)):
             if reason:
                 found[name] = reason
@@ -244,10 +246,13 @@ def _tolerated_fall(reference) -> float:
     return max(reference.noise_std, LAW_FALL * float(reference.reference_force.max()))
 
 
-def _without_term(model: ForceModel, name: str, samples: Samples, index: torch.Tensor) -> tuple[str | None, float]:
+def _without_term(
+    model: ForceModel, fitted: torch.Tensor, name: str, samples: Samples, index: torch.Tensor
+) -> tuple[str | None, float]:
     """(why term ``name`` does nothing on ``samples[index]`` at its fitted values, or None; the χ² there with the
     term taken out and the rest as fitted). It does nothing where a parameter ran off to a limit, or where its
-    effect on the fitted forces is below one unit of χ² under the noise model."""
+    effect on the fitted forces (``fitted``: the model's on ``samples`` [N]) is below one unit of χ² under the
+    noise model."""
     terms = model.terms
     model.terms = nn.ModuleDict({other: term for other, term in terms.items() if other != name})
     try:
@@ -258,7 +263,7 @@ def _without_term(model: ForceModel, name: str, samples: Samples, index: torch.T
     noise = samples.noise_floor[index]
     with torch.no_grad():
         chi_square = ((without - samples.force)[index] / noise).square().sum().item()
-        change = ((model(samples) - without)[index] / noise).square().sum().item()
+        change = ((fitted - without)[index] / noise).square().sum().item()
     limit = terms[name].degenerate()
     if limit:
         return limit, chi_square
