@@ -170,14 +170,15 @@ def diagnose(
     iterations: int,
     noise: NoiseModel,
     progress: Callable[[str], None] = print,
-    base_fit: PhysicsFit | None = None,
+    fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
     notes: list[str] | None = None,
     design: ExperimentDesign | None = None,
     reference: ReferenceCurve | None = None,
 ) -> Diagnosis:
     """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); candidate fits run
-    ``iterations`` LM steps; ``noise`` is the set's noise model; ``base_fit``: the base model already
-    fitted so on ``split.train``, if any; ``notes``: evidence about the data, in sentences; ``design``:
+    ``iterations`` LM steps; ``noise`` is the set's noise model; ``fitted``: fits already made so on
+    ``split.train`` under this noise model (the base model's, ``first_fits``'), reused as they are;
+    ``notes``: evidence about the data, in sentences; ``design``:
     what proposes the next experiment of each confounded group (None: none proposed); ``hybrid``: the
     trained hybrid twin, whose learned error the named terms are compared with (None: not trained);
     ``reference``: the elastic law, whose noise every residual shares (the whiteness test's null)."""
@@ -185,7 +186,6 @@ def diagnose(
     seen = split.judged(samples)
     test = structure_test(samples, seen, reference, noise, s.block, s.false_alarm)
     progress("diagnosis: fitting the base model and the candidate terms (K refitted with each)")
-    fitted = {(): base_fit} if base_fit is not None else None
     candidates = fit_candidates(
         make_model, samples, split, s.terms, s.max_terms, iterations, s.block, test, progress, fitted, s.bic_margin
     )
@@ -239,6 +239,28 @@ def diagnose(
     )
     diagnosis.summary = summarise(diagnosis, apparent, test)
     return diagnosis
+
+
+def first_fits(
+    make_model: Callable,
+    samples: Samples,
+    split: Split,
+    settings: DiagnosisSettings,
+    iterations: int,
+    noise: NoiseModel,
+    reference: ReferenceCurve | None = None,
+    fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
+    progress: Callable[[str], None] = print,
+) -> dict[tuple[str, ...], Candidate]:
+    """The base model and every single term fitted, and made to nest, as ``diagnose`` fits them first (arguments
+    as there), before anything is weighed: what a caller may read before the diagnosis (``pipeline.run`` caps the
+    noise's correlation by their residuals) and hand to it as ``fitted``, so that nothing is fitted twice."""
+    s = settings
+    test = structure_test(samples, split.judged(samples), reference, noise, s.block, s.false_alarm)
+    progress("diagnosis: fitting the base model and each candidate term alone (K refitted with each)")
+    return fit_candidates(
+        make_model, samples, split, s.terms, min(1, s.max_terms), iterations, s.block, test, progress, fitted
+    )
 
 
 def _held_out_test(

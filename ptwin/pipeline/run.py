@@ -20,7 +20,8 @@ from ptwin.data.noise import (
     rests_on_short_records,
 )
 from ptwin.diagnosis.design import ExperimentDesign
-from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, diagnose
+from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, diagnose, first_fits
+from ptwin.diagnosis.name import Candidate
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.physics_fit import PhysicsFit
 from ptwin.physics.samples import Samples
@@ -133,8 +134,8 @@ def diagnose_set(
     Where the set's baselines were too short to measure the noise's correlation, it is measured on the twin's
     residual in contact (``ptwin.data.noise.residual_noise``), or without a twin on the base model's less a
     polynomial per curve (``FLEXIBLE_DEGREE``), and the base model refitted under it. Where they measured it, a
-    reading above what the fitted models' residuals show is capped (``_capped_by_residuals``) and the diagnosis
-    runs again under the cap."""
+    reading above what the base model's and the single terms' residuals show (``first_fits``, fitted before
+    anything is weighed) is capped (``_capped_by_residuals``), and those fits are made again under the cap."""
     block, base_fit = settings.diagnosis.block, identification.base
     if twin is not None:
         measured = _on_twin_residual(prepared, twin, block)
@@ -146,31 +147,33 @@ def diagnose_set(
     if twin is not None and measured is not None:
         notes += _uncorrected_std(prepared)
 
-    def diagnosed(prepared: Prepared, base_fit: PhysicsFit | None) -> Diagnosis:
-        return diagnose(
-            prepared.make_model,
-            prepared.samples,
-            prepared.split,
-            twin,
-            identification.apparent,
-            candidates,
-            settings.optim.physics_fit.iterations,
-            prepared.noise,
-            progress,
-            base_fit=base_fit,
-            notes=notes,
-            design=_design(prepared, settings) if settings.diagnosis.design else None,
-            reference=prepared.make_model.reference,
-        )
+    iterations = settings.optim.physics_fit.iterations
 
-    diagnosis = diagnosed(prepared, base_fit)
-    capped = None if measured is not None else _capped_by_residuals(prepared, diagnosis, block)
-    if capped is None:
-        return diagnosis
-    progress(
-        f"diagnosis again: the noise's block inflation read off the baselines is capped at {capped.noise.inflation:.3g}"
+    def fitted_first(prepared: Prepared, base_fit: PhysicsFit | None) -> dict[tuple[str, ...], Candidate]:
+        reference, fitted = prepared.make_model.reference, None if base_fit is None else {(): base_fit}
+        model, samples, split = prepared.make_model, prepared.samples, prepared.split
+        return first_fits(model, samples, split, candidates, iterations, prepared.noise, reference, fitted, progress)
+
+    first = fitted_first(prepared, base_fit)
+    capped = None if measured is not None else _capped_by_residuals(prepared, first, block)
+    if capped is not None:
+        progress(f"the noise's block inflation read off the baselines is capped at {capped.noise.inflation:.3g}")
+        prepared, first = capped, fitted_first(capped, None)
+    return diagnose(
+        prepared.make_model,
+        prepared.samples,
+        prepared.split,
+        twin,
+        identification.apparent,
+        candidates,
+        iterations,
+        prepared.noise,
+        progress,
+        fitted={terms: c.fit for terms, c in first.items() if c.fit is not None},
+        notes=notes,
+        design=_design(prepared, settings) if settings.diagnosis.design else None,
+        reference=prepared.make_model.reference,
     )
-    return diagnosed(capped, None)
 
 
 def _on_twin_residual(prepared: Prepared, twin: HybridTwin, block: int) -> Prepared | None:
@@ -212,18 +215,18 @@ def _on_base_residual(prepared: Prepared, base_fit: PhysicsFit, block: int) -> P
     return _rebuilt(prepared, [replace(c, noise=corrected(c.noise, noise)) for c in prepared.fitted], noise)
 
 
-def _capped_by_residuals(prepared: Prepared, diagnosis: Diagnosis, block: int) -> Prepared | None:
+def _capped_by_residuals(prepared: Prepared, first: dict[tuple[str, ...], Candidate], block: int) -> Prepared | None:
     """``prepared`` with the correlation its baselines gave capped by what a model's residual in contact shows, or
     None where no residual shows less. A residual holds the noise, the elastic law's inherited noise and whatever
     the model misses, so its block inflation reads the noise's or more: the least over the base model and each
-    usable single term's (a line removed per curve) bounds the noise's from above, on records ten times the
-    baselines' (p07-like sets, four baselines of 160 samples of AR(1) noise of 20-sample memory, 40% white:
-    κ² 5.2–40 from the baselines, 16.7–24 from the residuals, 15.6 the noise's). A curve's own κ² is capped by
-    its own residual's the same way. κ² is then the lesser of the two readings; the ν blocks the tests rest on stay
-    the baselines'."""
+    usable single term's (``first``, ``first_fits``; a line removed per curve) bounds the noise's from above, on
+    records ten times the baselines' (p07-like sets, four baselines of 160 samples of AR(1) noise of 20-sample
+    memory, 40% white: κ² 5.2–40 from the baselines, 16.7–24 from the residuals, 15.6 the noise's). A curve's own
+    κ² is capped by its own residual's the same way. κ² is then the lesser of the two readings; the ν blocks the
+    tests rest on stay the baselines'."""
     std, best, residuals = prepared.noise.std, None, []
-    for terms, candidate in diagnosis.candidates.items():
-        if len(terms) > 1 or not candidate.usable:
+    for candidate in first.values():
+        if not candidate.usable:
             continue
         records, step = _contact_records(prepared.samples, candidate.fit.model)
         noise = residual_noise(records, std, step, block, 1, CAPPED)
