@@ -62,7 +62,7 @@ def test_baselines_that_read_the_noise_too_correlated_are_capped_by_what_the_res
     )
     meta, curves = simulate(experiment)
     write_recordings(tmp_path / "set", replace(meta, noise_std=experiment.noise_std), curves)
-    diagnosis = run(tmp_path / "set", coarse_cache, tmp_path / "run").diagnosis
+    diagnosis = run(tmp_path / "set", coarse_cache, tmp_path / "run", "diagnosis.design=false").diagnosis
     truth = model_inflation(1 - white, memory, 50)
     assert CAPPED in diagnosis["noise"]["source"]
     assert truth <= diagnosis["noise"]["inflation"] < 1.5 * truth

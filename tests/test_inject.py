@@ -78,7 +78,9 @@ def test_a_term_added_starts_where_the_elastic_force_does_whatever_the_reference
 
 
 def test_a_viscosity_added_to_a_set_is_found_with_its_size(tmp_path, coarse_cache):
-    settings = inject_settings(simulated_set(tmp_path / "set"), coarse_cache, "inject.sizes=[1.0]")
+    settings = inject_settings(
+        simulated_set(tmp_path / "set"), coarse_cache, "inject.sizes=[1.0]", "diagnosis.design=false"
+    )
     trials = detection(settings, tmp_path / "run", progress=lambda _: None)
     as_recorded, added = trials
     assert not as_recorded.confidence  # the clean set names nothing, and says what gamma fitted alone came to

@@ -70,7 +70,7 @@ def test_a_clean_soft_set_with_correlated_noise_and_estimated_contacts_is_not_de
 def test_strain_dependent_permeability_on_a_soft_set_is_reported_honestly(tmp_path, coarse_cache):
     # Three speeds a factor 3 apart: the term is absorbed by a smaller K. Honest: it is named, or K is
     # said not to be fixed, with the term among the confounded and an interval that covers the truth.
-    outcome = soft_run(tmp_path, coarse_cache, strain_dependent_permeability={"m": 2.0})
+    outcome = soft_run(tmp_path, coarse_cache, "diagnosis.design=false", strain_dependent_permeability={"m": 2.0})
     d = outcome.diagnosis
     named = [entry["term"] for entry in d["left_out"]]
     confounded = {name for group in d["confounded"] for name in group["terms"]}
