@@ -285,7 +285,9 @@ class ExperimentDesign:
 
     def _refit(self, fit: PhysicsFit, samples: Samples, index: torch.Tensor, starts=None) -> float:
         """χ² of ``fit``'s model refitted on ``samples[index]`` from the best of ``starts`` (default: its
-        current values and every start its terms offer), judged by the cost there, as the diagnosis fits."""
+        current values and every start its terms offer), judged by the cost there, as the diagnosis fits; the
+        reference curve's contact correction fitted or held as ``fit`` had it (the diagnosis's candidates follow
+        the base model's: one freed in a candidate and held in its rival would tilt their comparison)."""
         if starts is None:
             combos = itertools.product(*(VOCABULARY[t].STARTS for t in fit.terms))
             starts = [fit.params] + [
@@ -293,7 +295,8 @@ class ExperimentDesign:
             ]
         models = (self.make_model(fit.terms, values, fit.permeability) for values in starts)
         try:
-            return fit_physics(cheapest(models, samples, index), samples, index, REFIT, REFIT_TOLERANCE).chi_square
+            model = cheapest(models, samples, index)
+            return fit_physics(model, samples, index, REFIT, REFIT_TOLERANCE, fit.reference_free).chi_square
         except FitError:
             return math.inf
 
