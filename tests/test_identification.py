@@ -185,6 +185,26 @@ def test_a_term_growing_as_root_depth_starts_from_the_contacts_its_onset_reads(e
     assert not other.offsets.any() and other.reference.item() == 0.0
 
 
+def test_a_design_refit_holds_or_frees_the_reference_correction_as_the_candidates_fit_did(estimated, monkeypatch):
+    # A correction freed in one candidate and held in its rival tilts their comparison: the design refits each
+    # candidate with the correction as the diagnosis fitted it, whatever the refit alone would decide.
+    from ptwin.diagnosis import design as design_module
+
+    settings, p = estimated
+    design, train = _design(p, settings), p.split.train
+    refitted = []
+
+    def recorded(*args, **kwargs):
+        fit = fit_physics(*args, **kwargs)
+        refitted.append(fit.reference_free)
+        return fit
+
+    monkeypatch.setattr(design_module, "fit_physics", recorded)
+    for free in (False, True):
+        design._refit(fit_physics(p.make_model(()), p.samples, train, reference_free=free), p.samples, train)
+    assert refitted == [False, True]
+
+
 def test_a_simulated_next_curve_never_takes_a_recorded_curves_contact_correction(estimated):
     # Corrections are found by curve id: a recorded curve named 'next' must not lend its own to the design's
     # simulated next experiment, whose contact is known.
