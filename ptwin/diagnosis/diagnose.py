@@ -169,22 +169,20 @@ def diagnose(
     settings: DiagnosisSettings,
     iterations: int,
     noise: NoiseModel,
+    first: FirstFits,
     progress: Callable[[str], None] = print,
-    fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
     notes: list[str] | None = None,
     design: ExperimentDesign | None = None,
-    reference: ReferenceCurve | None = None,
 ) -> Diagnosis:
     """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); candidate fits run
-    ``iterations`` LM steps; ``noise`` is the set's noise model; ``fitted``: fits already made so on
-    ``split.train`` under this noise model (the base model's, ``first_fits``'), reused as they are;
-    ``notes``: evidence about the data, in sentences; ``design``:
-    what proposes the next experiment of each confounded group (None: none proposed); ``hybrid``: the
-    trained hybrid twin, whose learned error the named terms are compared with (None: not trained);
-    ``reference``: the elastic law, whose noise every residual shares (the whiteness test's null)."""
-    s = settings
+    ``iterations`` LM steps; ``noise`` is the set's noise model; ``first``: the structure test and the base
+    model and single terms fitted under it (``first_fits``), reused as they are; ``notes``: evidence about the
+    data, in sentences; ``design``: what proposes the next experiment of each confounded group (None: none
+    proposed); ``hybrid``: the trained hybrid twin, whose learned error the named terms are compared with (None:
+    not trained)."""
+    s, test = settings, first.test
     seen = split.judged(samples)
-    test = structure_test(samples, seen, reference, noise, s.block, s.false_alarm)
+    fitted = {terms: c.fit for terms, c in first.candidates.items() if c.fit is not None}
     progress("diagnosis: fitting the base model and the candidate terms (K refitted with each)")
     candidates = fit_candidates(
         make_model, samples, split, s.terms, s.max_terms, iterations, s.block, test, progress, fitted, s.bic_margin
@@ -241,6 +239,14 @@ def diagnose(
     return diagnosis
 
 
+@dataclass
+class FirstFits:
+    """What the diagnosis computes before it weighs anything (``first_fits``)."""
+
+    test: StructureTest  # the structure test's null under the noise model
+    candidates: dict[tuple[str, ...], Candidate]  # the base model and each single term, fitted under it
+
+
 def first_fits(
     make_model: Callable,
     samples: Samples,
@@ -251,16 +257,18 @@ def first_fits(
     reference: ReferenceCurve | None = None,
     fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
     progress: Callable[[str], None] = print,
-) -> dict[tuple[str, ...], Candidate]:
-    """The base model and every single term fitted, and made to nest, as ``diagnose`` fits them first (arguments
-    as there), before anything is weighed: what a caller may read before the diagnosis (``pipeline.run`` caps the
-    noise's correlation by their residuals) and hand to it as ``fitted``, so that nothing is fitted twice."""
+) -> FirstFits:
+    """The structure test under ``noise`` (``reference``: the elastic law, whose noise every residual shares),
+    and the base model and every single term fitted and made to nest under it, as ``diagnose`` fits them first
+    (``fitted``: fits already made, e.g. the base model's): what a caller may read before the diagnosis weighs
+    anything (``pipeline.run`` caps the noise's correlation by their residuals) and hand to it, so that nothing
+    is computed twice."""
     s = settings
     test = structure_test(samples, split.judged(samples), reference, noise, s.block, s.false_alarm)
     progress("diagnosis: fitting the base model and each candidate term alone (K refitted with each)")
-    return fit_candidates(
-        make_model, samples, split, s.terms, min(1, s.max_terms), iterations, s.block, test, progress, fitted
-    )
+    terms = min(1, s.max_terms)
+    candidates = fit_candidates(make_model, samples, split, s.terms, terms, iterations, s.block, test, progress, fitted)
+    return FirstFits(test, candidates)
 
 
 def _held_out_test(

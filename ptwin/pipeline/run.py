@@ -20,8 +20,7 @@ from ptwin.data.noise import (
     rests_on_short_records,
 )
 from ptwin.diagnosis.design import ExperimentDesign
-from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, diagnose, first_fits
-from ptwin.diagnosis.name import Candidate
+from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, FirstFits, diagnose, first_fits
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.physics_fit import PhysicsFit
 from ptwin.physics.samples import Samples
@@ -149,7 +148,7 @@ def diagnose_set(
 
     iterations = settings.optim.physics_fit.iterations
 
-    def fitted_first(prepared: Prepared, base_fit: PhysicsFit | None) -> dict[tuple[str, ...], Candidate]:
+    def fitted_first(prepared: Prepared, base_fit: PhysicsFit | None) -> FirstFits:
         reference, fitted = prepared.make_model.reference, None if base_fit is None else {(): base_fit}
         model, samples, split = prepared.make_model, prepared.samples, prepared.split
         return first_fits(model, samples, split, candidates, iterations, prepared.noise, reference, fitted, progress)
@@ -168,11 +167,10 @@ def diagnose_set(
         candidates,
         iterations,
         prepared.noise,
+        first,
         progress,
-        fitted={terms: c.fit for terms, c in first.items() if c.fit is not None},
         notes=notes,
         design=_design(prepared, settings) if settings.diagnosis.design else None,
-        reference=prepared.make_model.reference,
     )
 
 
@@ -215,7 +213,7 @@ def _on_base_residual(prepared: Prepared, base_fit: PhysicsFit, block: int) -> P
     return _rebuilt(prepared, [replace(c, noise=corrected(c.noise, noise)) for c in prepared.fitted], noise)
 
 
-def _capped_by_residuals(prepared: Prepared, first: dict[tuple[str, ...], Candidate], block: int) -> Prepared | None:
+def _capped_by_residuals(prepared: Prepared, first: FirstFits, block: int) -> Prepared | None:
     """``prepared`` with the correlation its baselines gave capped by what a model's residual in contact shows, or
     None where no residual shows less. A residual holds the noise, the elastic law's inherited noise and whatever
     the model misses, so its block inflation reads the noise's or more: the least over the base model and each
@@ -225,7 +223,7 @@ def _capped_by_residuals(prepared: Prepared, first: dict[tuple[str, ...], Candid
     κ² is capped by its own residual's the same way. κ² is then the lesser of the two readings; the ν blocks the
     tests rest on stay the baselines'."""
     std, best, residuals = prepared.noise.std, None, []
-    for candidate in first.values():
+    for candidate in first.candidates.values():
         if not candidate.usable:
             continue
         records, step = _contact_records(prepared.samples, candidate.fit.model)
