@@ -1,5 +1,6 @@
 """The diagnosis names what was concealed, says nothing on clean data, and improves the fit."""
 
+import collections
 import json
 import math
 import re
@@ -273,6 +274,28 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     assert sum(len(t) == largest for t in fitted) == {1: 3, 2: 3, 3: 1}[largest]
     # the base model fitted first, every subset with terms given it (where it starts: ``fit_with_starts``)
     assert starts[0] is None and all(base is not None and base.terms == () for base in starts[1:])
+
+
+def test_each_fit_is_one_line_of_progress_though_the_diagnosis_reuses_the_first_fits(monkeypatch):
+    # ``first_fits`` fits the base model and the single terms, ``diagnose`` reuses them and fits the pairs: each
+    # subset is said once, the base model too where it was handed in already fitted (``identify``'s).
+    import ptwin.diagnosis.name as name
+
+    def fit_with_starts(make_model, subset, samples, index, iterations, base=None):
+        fit = candidate(subset, 1000.0 + 100.0 * (3 - len(subset)), 1.0).fit
+        fit.model = lambda samples: samples.force + len(subset)
+        return fit
+
+    monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
+    monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: 50.0)
+    samples, split = ten_samples()
+    lines, terms = [], ["a", "b", "c"]
+    base = {(): fit_with_starts(None, (), samples, split.train, 1)}
+    first = name.fit_candidates(None, samples, split, terms, 1, 1, 50, ABOVE_FIVE, lines.append, base)
+    fitted = {t: c.fit for t, c in first.items()}
+    name.fit_candidates(None, samples, split, terms, 2, 1, 50, ABOVE_FIVE, lines.append, fitted, shown=first.keys())
+    said = collections.Counter(line[2:57].strip() for line in lines)  # the subset a line names
+    assert said == {label: 1 for label in ("base", "a", "b", "c", "a + b", "a + c", "b + c")}
 
 
 def test_fits_that_do_not_nest_are_fitted_again_from_their_neighbours_optimum(monkeypatch):

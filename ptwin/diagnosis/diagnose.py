@@ -183,9 +183,19 @@ def diagnose(
     s, test = settings, first.test
     seen = split.judged(samples)
     fitted = {terms: c.fit for terms, c in first.candidates.items() if c.fit is not None}
-    progress("diagnosis: fitting the base model and the candidate terms (K refitted with each)")
     candidates = fit_candidates(
-        make_model, samples, split, s.terms, s.max_terms, iterations, s.block, test, progress, fitted, s.bic_margin
+        make_model,
+        samples,
+        split,
+        s.terms,
+        s.max_terms,
+        iterations,
+        s.block,
+        test,
+        _headed("diagnosis: fitting the candidate terms together (K refitted with each)", progress),
+        fitted,
+        s.bic_margin,
+        shown=first.candidates.keys(),
     )
     base = candidates[()]
     twin = _twin_rmse(hybrid, samples, split)
@@ -237,6 +247,20 @@ def diagnose(
     )
     diagnosis.summary = summarise(diagnosis, apparent, test)
     return diagnosis
+
+
+def _headed(header: str, progress: Callable[[str], None]) -> Callable[[str], None]:
+    """``progress`` with ``header`` said before its first line, and never where there is none."""
+    said = False
+
+    def say(line: str) -> None:
+        nonlocal said
+        if not said:
+            progress(header)
+            said = True
+        progress(line)
+
+    return say
 
 
 @dataclass
