@@ -382,7 +382,25 @@ def test_a_term_not_added_because_named_is_told_from_one_whose_sizes_never_reach
     native = {"solid_relaxation": Own("g", 0.148), "cantilever_drag": Own("b", 0.0)}
     rows = limits_section({"solid_relaxation": [], "cantilever_drag": []}, native, {"solid_relaxation"})[-2:]
     assert rows[0] == "| `solid_relaxation` | named in the recordings as they are (g 0.148): not added | – | – | – |"
-    assert rows[1].startswith("| `cantilever_drag` | its peak stays below 8× the noise up to 1000× a typical size")
+    assert rows[1].startswith("| `cantilever_drag` | its peak stays below 8× the noise for b 0.001 to 1000 times")
+
+
+def test_a_term_whose_sizes_stop_short_of_the_ladder_says_where_its_peak_stays():
+    # The shared p03 (real PAAm noise): a pore relaxation peaks at 16× the noise at M 89.9 Pa and below 32× at every M
+    # tried, so its ladder ends there; the table says why it tried nothing larger.
+    from ptwin.pipeline.inject import limits_section
+
+    def missed(m, peak):
+        return Trial(1.0, m, peak, "", None, [], False, True, alone=4e4)
+
+    native = {"pore_pressure_relaxation": Own("M", 4e4, absent=math.inf)}
+    found = {"pore_pressure_relaxation": [missed(418.0, 8.0), missed(89.9, 16.1)]}
+    (row,) = limits_section(found, native, set())[-1:]
+    assert row.startswith(
+        "| `pore_pressure_relaxation` | not named up to a peak of 16× the noise; its peak stays below 32× the noise "
+        "for M 0.001 to 1000 times a typical one (as physical) | – | – | M 89.9 Pa (16×: not named (M 4e+04 fitted "
+        "alone))"
+    )
 
 
 @pytest.mark.slow
