@@ -182,21 +182,7 @@ def diagnose(
     not trained)."""
     s, test = settings, first.test
     seen = split.judged(samples)
-    fitted = {terms: c.fit for terms, c in first.candidates.items() if c.fit is not None}
-    candidates = fit_candidates(
-        make_model,
-        samples,
-        split,
-        s.terms,
-        s.max_terms,
-        iterations,
-        s.block,
-        test,
-        _headed("diagnosis: fitting the candidate terms together (K refitted with each)", progress),
-        fitted,
-        s.bic_margin,
-        shown=first.candidates.keys(),
-    )
+    candidates = _all_fits(make_model, samples, split, s, iterations, first, progress)
     base = candidates[()]
     twin = _twin_rmse(hybrid, samples, split)
     evidence = shape_evidence(candidates, test)
@@ -247,6 +233,35 @@ def diagnose(
     )
     diagnosis.summary = summarise(diagnosis, apparent, test)
     return diagnosis
+
+
+def _all_fits(
+    make_model: Callable,
+    samples: Samples,
+    split: Split,
+    settings: DiagnosisSettings,
+    iterations: int,
+    first: FirstFits,
+    progress: Callable[[str], None],
+) -> dict[tuple[str, ...], Candidate]:
+    """Every subset the diagnosis weighs (``fit_candidates``): ``first``'s fits reused, and not listed again."""
+    s = settings
+    fitted = {terms: c.fit for terms, c in first.candidates.items() if c.fit is not None}
+    progress = _headed("diagnosis: fitting the candidate terms together (K refitted with each)", progress)
+    return fit_candidates(
+        make_model,
+        samples,
+        split,
+        s.terms,
+        s.max_terms,
+        iterations,
+        s.block,
+        first.test,
+        progress,
+        fitted,
+        s.bic_margin,
+        shown=first.candidates.keys(),
+    )
 
 
 def _headed(header: str, progress: Callable[[str], None]) -> Callable[[str], None]:
