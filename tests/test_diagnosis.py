@@ -292,10 +292,10 @@ def test_each_fit_is_one_line_of_progress_though_the_diagnosis_reuses_the_first_
     lines, terms = [], ["a", "b", "c"]
     base = {(): fit_with_starts(None, (), samples, split.train, 1)}
     first = name.fit_candidates(None, samples, split, terms, 1, 1, 50, ABOVE_FIVE, lines.append, base)
-    fitted = {t: c.fit for t, c in first.items()}
-    name.fit_candidates(None, samples, split, terms, 2, 1, 50, ABOVE_FIVE, lines.append, fitted, shown=first.keys())
+    every = name.fit_candidates(None, samples, split, terms, 2, 1, 50, ABOVE_FIVE, lines.append, reused=first)
     said = collections.Counter(line[2:57].strip() for line in lines)  # the subset a line names
     assert said == {label: 1 for label in ("base", "a", "b", "c", "a + b", "a + c", "b + c")}
+    assert all(every[subset] is candidate for subset, candidate in first.items())  # taken whole, not made again
 
 
 def test_fits_that_do_not_nest_are_fitted_again_from_their_neighbours_optimum(monkeypatch):

@@ -244,9 +244,8 @@ def _all_fits(
     first: FirstFits,
     progress: Callable[[str], None],
 ) -> dict[tuple[str, ...], Candidate]:
-    """Every subset the diagnosis weighs (``fit_candidates``): ``first``'s fits reused, and not listed again."""
+    """Every subset the diagnosis weighs (``fit_candidates``): ``first``'s candidates reused, and not listed again."""
     s = settings
-    fitted = {terms: c.fit for terms, c in first.candidates.items() if c.fit is not None}
     progress = _headed("diagnosis: fitting the candidate terms together (K refitted with each)", progress)
     return fit_candidates(
         make_model,
@@ -258,9 +257,8 @@ def _all_fits(
         s.block,
         first.test,
         progress,
-        fitted,
-        s.bic_margin,
-        shown=first.candidates.keys(),
+        bic_margin=s.bic_margin,
+        reused=first.candidates,
     )
 
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import collections
 import itertools
 import math
-from collections.abc import Callable, Collection
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -84,7 +84,7 @@ def fit_candidates(
     progress: Callable[[str], None] = print,
     fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
     bic_margin: float = math.inf,
-    shown: Collection[tuple[str, ...]] = (),
+    reused: dict[tuple[str, ...], Candidate] | None = None,
 ) -> dict[tuple[str, ...], Candidate]:
     """Fits of the base model, every single term and, while the best usable subset of k − 1 terms (none
     usable: the best smaller one) leaves structure, every subset of k ≤ ``max_terms`` terms, on the train
@@ -92,21 +92,22 @@ def fit_candidates(
     subsets of k that contain one of k − 1 beating every smaller one by ``bic_margin`` (the module docstring).
     A fit that fails is kept with its reason (``Candidate.failure``) and left out of every choice.
 
-    ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are; each fit
-    makes a line of ``progress``, but for the reused fits of ``shown``'s subsets, whose lines were given already.
+    ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are;
+    ``reused``: candidates already made of them on these samples (``diagnose.first_fits``'), taken whole and
+    not listed again. Every other candidate makes a line of ``progress``.
     """
-    fitted = fitted or {}
+    fitted, reused = fitted or {}, reused or {}
     judged = split.judged(samples), split.pinning(samples)
     candidates = {}
 
     def add(subset, fit=None, how=""):
+        if fit is None and subset in reused:
+            candidates[subset] = reused[subset]
+            return
         base = candidates[()].fit if () in candidates else None
-        shown_already = fit is None and subset in fitted and subset in shown
         fit = fit or fitted.get(subset)
         candidate = _candidate(subset, fit, make_model, samples, split, judged, iterations, block, base)
         candidates[subset] = candidate
-        if shown_already:
-            return
         name = " + ".join(subset) or "base"
         figures = f"BIC {candidate.fit.bic:12.1f}  val RMS {candidate.val_rmse * 1e9:7.3f} nN" if candidate.fit else ""
         progress(f"  {name:<55s} {figures:<37s}  ({candidate.state}){how}")
