@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from ptwin.fitting.lm import LevenbergMarquardt, Traced, covariance
+from ptwin.fitting.physics_fit import DAMPING_DECREASE, LOG_PERMEABILITY_STEP
 
 
 def test_the_reverse_mode_jacobian_is_the_closed_form_even_where_a_parameter_is_unused_or_enters_linearly():
@@ -74,6 +75,26 @@ def test_a_parameter_whose_force_grows_e_fold_a_unit_is_crossed_in_fewer_steps_w
     assert abs(solver.theta.item()) < 1e-8
     assert sum(step.accepted for step in steps) == accepted
     assert len(steps) == most and not steps[-1].accepted
+
+
+def test_a_step_limit_crosses_the_e_folds_in_accepted_steps_of_that_length_from_the_start():
+    # The same 16 e-folds with log K's limit of the physics fits (two decades a step, DAMPING_DECREASE): the
+    # linearisation of e^(−θ) promises a step to θ = 0 at once, which falls short eight times above while the
+    # damping grows; held to 4.6 the first three steps are accepted, each the limit long, and θ ends where it did.
+    t = torch.linspace(0.5, 2.0, 50, dtype=torch.float64)
+
+    def residual(theta):
+        return (torch.exp(-theta[0]) - 1.0) * t
+
+    limit = torch.tensor([LOG_PERMEABILITY_STEP], dtype=torch.float64)
+    solver = LevenbergMarquardt(residual, torch.tensor([16.0]).double(), decrease=DAMPING_DECREASE, step_limit=limit)
+    path, steps = [solver.theta.item()], []
+    solver.run(200, tolerance=1e-12, callback=lambda step: (steps.append(step), path.append(solver.theta.item())))
+    assert abs(solver.theta.item()) < 1e-8
+    assert [step.accepted for step in steps[:3]] == [True, True, True]
+    assert path[3] == pytest.approx(16.0 - 3 * LOG_PERMEABILITY_STEP, rel=1e-12)
+    assert max(abs(a - b) for a, b in zip(path, path[1:])) <= LOG_PERMEABILITY_STEP * (1 + 1e-12)
+    assert len(steps) < 23  # the unlimited run's steps (above)
 
 
 def test_each_step_evaluates_the_model_once_its_jacobian_taken_from_the_accepted_trial():

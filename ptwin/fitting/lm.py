@@ -2,8 +2,9 @@
 
 Jacobians by reverse mode (``Traced``), Marquardt scaling
 (the damping acts on diag(JᵀJ), so parameters of any unit are treated alike), Nielsen's
-gain-ratio damping update, and an optional per-parameter learning rate that scales
-each accepted step (a lower rate for K than for a network, as the paper trains).
+gain-ratio damping update, an optional per-parameter learning rate that scales
+each accepted step (a lower rate for K than for a network, as the paper trains), and an
+optional per-parameter step limit that shortens a longer step along its direction.
 The state is a plain dict of tensors: a checkpoint resumes it exactly.
 
 A trial step the model cannot evaluate (a parameter outside the model's domain: a
@@ -16,6 +17,7 @@ Only a start the model cannot evaluate, or a Jacobian that is not finite, ends t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -87,11 +89,11 @@ class ParameterVector:
             for name, value in self.as_dict(theta).items():
                 params[name].copy_(value)
 
-    def expand(self, per_name: dict[str, float]) -> torch.Tensor:
-        """A per-entry vector from one value per parameter name (default 1)."""
-        return torch.cat([torch.full((s,), float(per_name.get(n, 1.0))) for n, s in zip(self.names, self.sizes)]).to(
-            torch.float64
-        )
+    def expand(self, per_name: dict[str, float], default: float = 1.0) -> torch.Tensor:
+        """A per-entry vector from one value per parameter name (``default`` for the names not given)."""
+        return torch.cat(
+            [torch.full((s,), float(per_name.get(n, default))) for n, s in zip(self.names, self.sizes)]
+        ).to(torch.float64)
 
 
 class FitError(RuntimeError):
@@ -112,7 +114,10 @@ class LevenbergMarquardt:
     """Minimise ½‖residual(θ)‖². ``learning_rate``: one factor per entry of θ (default 1); ``trace``: θ ↦ the
     residual evaluated there, ``.value`` now and ``.jacobian_and_value()`` → (J, r) later, where the residual
     knows a cheaper route than differentiating all of θ at once (default: ``Traced``); ``decrease``: the most
-    an accepted step lowers the damping by (Nielsen's 1/3)."""
+    an accepted step lowers the damping by (Nielsen's 1/3); ``step_limit``: the most one step may move each entry
+    of θ (default: no limit); a longer step is shortened along its direction, so it still promises a decrease.
+    Where a residual is exponential in an entry (a force ∝ 1/K in log K) its linearisation promises far more
+    than a step of many e-folds gives, and LM would learn that by rejected steps while the damping grows."""
 
     def __init__(
         self,
@@ -122,11 +127,13 @@ class LevenbergMarquardt:
         damping: float = 1e-3,
         trace: Callable[[torch.Tensor], Traced] | None = None,
         decrease: float = 1 / 3,
+        step_limit: torch.Tensor | None = None,
     ):
         self.residual = residual
         self.decrease = decrease
         self.trace = trace if trace is not None else (lambda theta: Traced(residual, theta))
         self.learning_rate = torch.ones_like(theta) if learning_rate is None else learning_rate.to(theta)
+        self.step_limit = torch.full_like(theta, math.inf) if step_limit is None else step_limit.to(theta)
         self.state = {
             "theta": theta.clone(),
             "damping": torch.tensor(float(damping), dtype=torch.float64),
@@ -180,6 +187,9 @@ class LevenbergMarquardt:
             delta = -torch.linalg.solve(normal + s["damping"] * torch.diag(scale), gradient) * self.learning_rate
         except RuntimeError:  # singular even with damping: a larger damping next time
             delta, solved = torch.zeros_like(gradient), False
+        longest = float((delta.abs() / self.step_limit).max()) if delta.numel() else 0.0
+        if longest > 1.0:
+            delta = delta / longest
         predicted = -(gradient @ delta + 0.5 * delta @ normal @ delta)
         candidate = s["theta"] + delta
         new_cost, traced = self._trial(candidate)

@@ -32,6 +32,10 @@ LAW_FALL = 0.5  # of the reference's largest force: more fall of the elastic law
 # start (K at 1e-9 m², F_D ∝ 1/K) the steps have gain ratio ≈ 1 and each moves log K by ln(1/cap) while the
 # damping falls by the cap: 16 e-folds took 25 accepted steps at 1/3 and take 14 (``tests/test_lm.py``).
 DAMPING_DECREASE = 0.1
+# The most one LM step moves log K: two decades. F_D ∝ 1/K is exponential in log K, and from the fluid-off start its
+# linearisation promised steps of ten e-folds and more that fell short; LM rejected three to seven of them while the
+# damping grew (``tests/test_lm.py``; on the bench map's spots those starts took 22 steps each, 9 of them rejected).
+LOG_PERMEABILITY_STEP = math.log(100.0)
 
 
 @dataclass
@@ -180,7 +184,8 @@ def fit_physics(
 def _least_squares(model: ForceModel, samples: Samples, index: torch.Tensor, iterations: int, tolerance: float):
     """LM on the model's free parameters, left at the optimum: (their vector, the solver, θ)."""
     vector, residual = scaled_residual(model, samples, index)
-    solver = LevenbergMarquardt(residual, vector.get(), decrease=DAMPING_DECREASE)
+    limit = vector.expand({PERMEABILITY: LOG_PERMEABILITY_STEP}, default=math.inf)
+    solver = LevenbergMarquardt(residual, vector.get(), decrease=DAMPING_DECREASE, step_limit=limit)
     theta = solver.run(iterations, tolerance, settled=SETTLED)
     vector.set(theta)
     return vector, solver, theta
