@@ -10,7 +10,7 @@ from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.noise import NoiseModel, model_inflation
 from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.diagnosis.locate import pooled_whiteness
-from ptwin.diagnosis.null import MODEL_ERROR, structure_test
+from ptwin.diagnosis.null import MODEL_ERROR, TermEvidence, structure_test
 from ptwin.physics.elastic import ReferenceCurve
 from ptwin.physics.samples import Samples
 from ptwin.synth.simulator import Experiment, correlated_noise, simulate
@@ -249,3 +249,14 @@ def test_the_held_out_test_with_samples_pinning_contacts_keeps_its_false_alarm_r
     assert kept(shape, ramp, 0 * shape, 0 * ramp) <= 0.1
     assert kept(shape, ramp, tolerated, tolerated_before) <= 0.1
     assert kept(0 * shape, ramp, 0 * shape, 5 * tolerated_before) >= 0.95
+
+
+@pytest.mark.parametrize(
+    ("gain", "said"),
+    [(37.4, "takes 37 units of χ² off"), (-0.3, "takes 0 units of χ² off"), (-4.2, "adds 4 units of χ² to")],
+)
+def test_a_terms_gain_is_said_as_what_it_takes_off_or_adds_never_a_negative_or_minus_zero(gain, said):
+    # Held-out samples can fit worse with the term (real agarose B: -4 on validation, -0 before contact).
+    words = TermEvidence("solid_viscosity", gain, 10.0, 1.0, 0.005).words()
+    assert f"solid_viscosity {said} the residual under the noise model" in words
+    assert "-" not in words.split("residual")[0]

@@ -197,8 +197,11 @@ class TermEvidence:
         return self.gain > self.threshold
 
     def words(self) -> str:
+        # A fit on the training samples can lose on the others: a negative gain is χ² the term adds there.
+        gain = round(self.gain)
+        change = f"takes {gain} units of χ² off" if gain >= 0 else f"adds {-gain} units of χ² to"
         return (
-            f"{self.term} takes {self.gain:.0f} units of χ² off the residual under the noise model, where noise "
+            f"{self.term} {change} the residual under the noise model, where noise "
             f"and a model error of {MODEL_ERROR:g} noise std give at most {self.threshold:.0f} one time in "
             f"{1 / self.false_alarm:.0f}"
         )
