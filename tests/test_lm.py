@@ -97,7 +97,8 @@ def test_a_step_limit_crosses_the_e_folds_in_accepted_steps_of_that_length_from_
     assert len(steps) < 23  # the unlimited run's steps (above)
 
 
-def test_each_step_evaluates_the_model_once_its_jacobian_taken_from_the_accepted_trial():
+def _counted_decay_fit() -> tuple[LevenbergMarquardt, list]:
+    """LM on a decay a·exp(−e^b·t) from a poor start (truth a = 2, b = −1.3), and the θ of each evaluation."""
     t = torch.linspace(0, 4, 200, dtype=torch.float64)
     calls = []
 
@@ -105,12 +106,29 @@ def test_each_step_evaluates_the_model_once_its_jacobian_taken_from_the_accepted
         calls.append(theta.detach().clone())
         return theta[0] * torch.exp(-theta[1].exp() * t) - 2.0 * torch.exp(-math.exp(-1.3) * t)
 
-    solver = LevenbergMarquardt(residual, torch.tensor([0.5, 0.5], dtype=torch.float64))
+    return LevenbergMarquardt(residual, torch.tensor([0.5, 0.5], dtype=torch.float64)), calls
+
+
+def test_each_step_evaluates_the_model_once_its_jacobian_taken_from_the_accepted_trial():
+    solver, calls = _counted_decay_fit()
     steps = []
     solver.run(200, tolerance=0.0, callback=steps.append)
     assert any(not step.accepted for step in steps) and sum(step.accepted for step in steps) > 5
     assert len(calls) == 1 + len(steps)  # the first linearisation, then one trial a step
     torch.testing.assert_close(solver.theta, torch.tensor([2.0, -1.3], dtype=torch.float64), rtol=1e-8, atol=1e-8)
+
+
+@pytest.mark.parametrize("iterations", [10, 200])  # the run ends on an accepted step; on a rejected one
+def test_the_jacobian_where_a_run_ends_is_the_runs_own_the_model_not_evaluated_again(iterations):
+    solver, calls = _counted_decay_fit()
+    steps = []
+    solver.run(iterations, tolerance=1e-10, callback=steps.append)
+    assert steps[-1].accepted == (iterations == 10)
+    evaluated = len(calls)
+    jacobian, r = solver.linearised()
+    assert len(calls) == evaluated
+    fresh_jacobian, fresh_r = solver.linearise(solver.theta)
+    assert torch.equal(jacobian, fresh_jacobian) and torch.equal(r, fresh_r)
 
 
 def test_a_settled_fit_stops_once_a_step_gains_less_than_asked_and_no_sooner():

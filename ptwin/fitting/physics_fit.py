@@ -133,7 +133,7 @@ def fit_physics(
         vector, solver, theta, linear = _with_reference_contact(
             model, samples, index, iterations, tolerance, reference_free
         )
-    jacobian, r = solver.checked_linearise(theta) if linear is None else linear
+    jacobian, r = solver.linearised() if linear is None else linear
     cov = covariance(jacobian, r) * samples.noise_inflation
     std = cov.diagonal().clamp(min=0).sqrt()
     correlation = cov / torch.outer(std, std).clamp(min=1e-300)
@@ -205,7 +205,8 @@ def _with_reference_contact(
     error no larger than the onset, its 95% Wald interval reaching into it. Else the held fit, the correction
     back where it was and held. ``free``: True keeps the freed fit wherever it can be made, False holds the
     correction, both whatever this model's fit would say (None: it decides). Returns ``_least_squares``'s three
-    and (J, r) at θ where the freed fit is kept (the decision linearised there), else None.
+    and (J, r) at θ, or None where the kept fit's own run has them (``LevenbergMarquardt.linearised``): not where
+    the held fit is kept after the freed one, whose run moved the correction under the held run's graph.
 
     Held first: from the estimate, with the other parameters far from theirs, LM moves the correction first and
     can stall there (real PAAm with 10 Pa·s added: χ² 3710 against 715 settled first, γ −0.6 against 10.1).
@@ -224,7 +225,7 @@ def _with_reference_contact(
     reference.requires_grad_(True)
     try:
         freed = _least_squares(model, samples, index, iterations, tolerance)
-        linear = freed[1].checked_linearise(freed[2])
+        linear = freed[1].linearised()
         variance = covariance(*linear) * samples.noise_inflation
         names, sizes = freed[0].names, freed[0].sizes
         where = sum(sizes[: names.index("contact.reference")])  # its entry of θ (a set of one curve: no offsets)
@@ -238,7 +239,7 @@ def _with_reference_contact(
     with torch.no_grad():
         reference.copy_(start)
     reference.requires_grad_(False)
-    return (*held, None)
+    return (*held, held[1].checked_linearise(held[2]))
 
 
 def _tolerated_fall(reference) -> float:
