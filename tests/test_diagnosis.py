@@ -131,7 +131,9 @@ def test_choose_takes_the_lowest_physical_bic_then_prunes_what_does_not_pay_twic
     }
     chosen, notes = choose(candidates, 10.0, held_out)
     assert chosen == ("a",)
-    assert len(notes) == 1 and notes[0].startswith("b pruned: removing it costs 11.4 BIC (needs ≥ 10), and on the ")
+    # Said from which subset: real agarose C read "solid_viscosity pruned: removing it costs 7.9 BIC" beside
+    # "solid_viscosity: solid_viscosity does nothing", of its fit alone.
+    assert len(notes) == 1 and notes[0].startswith("b pruned from a + b: removing it costs 11.4 BIC (needs ≥ 10), and")
     assert "where noise and a model error of 0.15 noise std give at most" in notes[0]
     assert confounded(candidates, chosen, 10.0, held_out) == [("d",)]
     assert rejected(candidates, 10.0) == [{"term": "c", "params": {"p": 1.0}, "why": "p < 0"}]
@@ -173,7 +175,7 @@ def test_a_term_that_only_keeps_another_physical_is_weighed_with_it_against_the_
     assert weighed_against(candidates, ("a", "b"), "a") == ("b",)
     chosen, notes = choose(candidates, 10.0, held_out)
     assert chosen == ()
-    assert notes[-1].startswith("b pruned together with a (no explanation without b): removing it costs 4.5 BIC")
+    assert notes[-1].startswith("b pruned from a + b together with a (no explanation without b): removing it costs 4.5")
     # The same pair 23 BIC better than the base model: both are kept, the pair weighed whole.
     better = {**candidates, ("a", "b"): candidate(("a", "b"), 1060.0, 1.0, residual=noise)}
     assert choose(better, 10.0, held_out) == (("a", "b"), [])
@@ -584,7 +586,10 @@ def test_the_networks_witness_is_never_a_negative_share():
     assert "learned little" in _witness_words(-2.0)
 
 
-@pytest.mark.parametrize("named", [[], [{"term": "solid_viscosity", "confidence": "weak"}]])
+PAIR = [{"term": "solid_relaxation", "confidence": "weak"}, {"term": "solid_viscosity", "confidence": "weak"}]
+
+
+@pytest.mark.parametrize("named", [[], [{"term": "solid_viscosity", "confidence": "weak"}], PAIR])
 def test_structure_no_term_explains_is_said_beside_what_a_term_takes_of_it(named):
     from types import SimpleNamespace
 
@@ -606,11 +611,27 @@ def test_structure_no_term_explains_is_said_beside_what_a_term_takes_of_it(named
     payload = {"rejected": [], "confounded": [], "unexplained": True, "left_out": named, "fit": d.fit}
     line = _others(payload)[0]
     assert "no interval is given" in sentence and "hybrid network" not in sentence + line
-    if named:
+    if named == PAIR:  # real PAAm F as recorded: "beyond what `solid_relaxation` and `solid_viscosity` takes"
+        assert "solid_relaxation and solid_viscosity take part of it (weak:" in sentence
+        assert "structure remains beyond what `solid_relaxation` and `solid_viscosity` take (named, weak)" in line
+    elif named:
         assert "solid_viscosity takes part of it (weak: the validation RMS falls to 2.00× the noise std)" in sentence
         assert "structure remains beyond what `solid_viscosity` takes (named, weak)" in line
     else:
         assert "No term of the vocabulary explains the residual" in sentence and "no term is claimed" in line
+
+
+@pytest.mark.parametrize(("curves", "verb"), [(["v15"], "v15 disagrees"), (["v5", "v15"], "v5, v15 disagree")])
+def test_where_the_curves_disagree_is_said_in_one_sentence_whatever_their_number(curves, verb):
+    # Real PAAm F as recorded, one curve off the base model: "v15 disagree with the base model".
+    from types import SimpleNamespace
+
+    from ptwin.diagnosis.locate import Mismatch
+    from ptwin.diagnosis.words import _where
+
+    where = [Mismatch(curve, 1e-6, 0.0, 6.2e-7, 8.2e-11, 1.3e-11, 546.0) for curve in curves]
+    sentence = _where(SimpleNamespace(whiteness={"base": 546.0}, where=where), 4.9, ABOVE_FIVE)
+    assert sentence.startswith(f"{verb} with the base model between 0.00 and 0.62 µm, up to 6.3× the noise std")
 
 
 def test_a_rival_whose_k_stayed_at_the_top_of_the_field_gives_that_limit_not_a_value():

@@ -322,9 +322,11 @@ def choose(candidates: dict, bic_margin: float, held_out: HeldOutTest) -> tuple[
             bic_cost = usable[without].fit.bic - usable[chosen].fit.bic
             gain = held_out.evidence(usable[without], usable[chosen], term)
             if bic_cost < bic_margin or not gain.beyond:
+                # from which subset: the notes also say what each term does alone
+                source = f" from {' + '.join(chosen)}" if len(chosen) > 1 else ""
                 notes.append(
-                    f"{term} pruned{together_with(chosen, without, term)}: removing it costs {bic_cost:.1f} BIC (needs "
-                    f"≥ {bic_margin:g}), and on the validation samples {gain.words()}"
+                    f"{term} pruned{source}{together_with(chosen, without, term)}: removing it costs {bic_cost:.1f} "
+                    f"BIC (needs ≥ {bic_margin:g}), and on the validation samples {gain.words()}"
                 )
                 chosen, pruned = without, True
                 break

@@ -176,8 +176,9 @@ def _where(d, ratio: float, test) -> str:
     lo = min(m.depth_from for m in d.where) * MICRO
     hi = max(m.depth_to for m in d.where) * MICRO
     worst = max(m.rms_residual / m.noise_floor for m in d.where)
+    verb = "disagrees" if len(d.where) == 1 else "disagree"
     return (
-        f"{curves} disagree with the base model between {lo:.2f} and {hi:.2f} µm, up to {worst:.1f}× the noise "
+        f"{curves} {verb} with the base model between {lo:.2f} and {hi:.2f} µm, up to {worst:.1f}× the noise "
         f"std ({test.words(d.whiteness['base'])}). "
     )
 

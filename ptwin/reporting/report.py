@@ -128,7 +128,8 @@ def _others(payload: dict) -> list[str]:
         ]
     if payload["unexplained"]:
         named = " and ".join(f"`{entry['term']}`" for entry in payload["left_out"])
-        beyond = f" beyond what {named} takes (named, weak)" if named else ""
+        verb = "takes" if len(payload["left_out"]) == 1 else "take"
+        beyond = f" beyond what {named} {verb} (named, weak)" if named else ""
         said = ["the hybrid network's correction is kept"] * (payload["fit"]["hybrid"]["val_rmse"] is not None)
         said += ["no term is claimed"] * (not named)
         tail = f"; {' and '.join(said)}" if said else ""
