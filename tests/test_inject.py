@@ -178,7 +178,13 @@ def test_a_size_found_of_a_term_that_vanishes_as_its_strength_grows_adds_in_its_
     # recordings' own", the g 1.8 they fit as they are at tau 542 s: another shape of the term.
     relaxation = Trial(64.0, 0.0643, 64.0, "weak", 0.0582, [0.0513, 0.0662], False, True)
     assert relaxation.verdict(Own("g", 1.82)).endswith("fit g 1.82: the size found is not read over it")
-    assert Own("M", math.inf, math.inf).words().startswith("M none, the recordings' own")
+    # Real PAAm C as recorded, its viscosity fitted at −2.05 Pa·s: "read over gamma none, the recordings' own".
+    assert (
+        Own("gamma", 0.0).words()
+        == "a size found is read whole: the recordings' own fit of gamma failed or is not physical"
+    )
+    assert Own("M", math.inf, math.inf).words().endswith("the recordings' own fit of M failed or is not physical")
+    assert Own("M", 2.05e6, math.inf).words() == "a size found is read over M 2.05e+06, the recordings' own"
 
 
 def test_a_term_not_named_comes_with_the_base_model_permeability():

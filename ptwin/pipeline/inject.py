@@ -78,8 +78,10 @@ class Own:
         return f"the recordings as they are fit {self.strength} {self.value:.3g}: the size found is not read over it"
 
     def words(self) -> str:
-        value = "none" if self.value == self.absent else f"{self.value:.3g}"
-        return f"{self.strength} {value}, the recordings' own (none where its fit is not physical)"
+        """What a size found is read over, in words."""
+        if self.value == self.absent:
+            return f"a size found is read whole: the recordings' own fit of {self.strength} failed or is not physical"
+        return f"a size found is read over {self.strength} {self.value:.3g}, the recordings' own"
 
 
 @dataclass
@@ -210,7 +212,7 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
     as_recorded, prepared, base_fit = _as_recorded(settings, output_dir)
     trials = [_trial(0.0, None, 0.0, as_recorded, inject.term, strength)]
     own = native_strength(prepared, inject.term, settings.optim.physics_fit.iterations, base_fit, trials[0])
-    progress(f"  as recorded: {trials[0].verdict(own)}; a size found is read over {own.words()}")
+    progress(f"  as recorded: {trials[0].verdict(own)}; {own.words()}")
     for i, size in enumerate(sorted(inject.sizes), start=1):
         params = inject.scaled(size)
         trial = _added(settings, prepared, base_fit, as_recorded, inject.term, params, output_dir / f"size-{size:g}")
