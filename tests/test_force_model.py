@@ -80,6 +80,30 @@ def test_terms_report_non_physical_values():
     assert VOCABULARY["pore_pressure_relaxation"](rho, M=1e4).violation() is None
 
 
+@pytest.mark.parametrize(
+    ("delta", "contradicted"),
+    [
+        (-0.5e-6, True),  # a Hertz solid pushes 22 nN half a micron in: the recording shows its baseline there
+        (-20e-9, False),  # 0.18 nN, under 5σ: a contact there is the baseline's to hide
+        (20e-9, False),  # the recording is still at its baseline where this contact begins
+        (0.3e-6, True),  # it already pushes 0.3 µm past the recorded contact: no contact begins there
+    ],
+)
+def test_a_contact_offset_is_held_to_where_the_recording_says_contact_can_be(delta, contradicted):
+    # The elastic law is read off the reference at its recorded depths: a common contact shift changes only the
+    # fluid's geometry, and a fit put it 564 nm before the recorded contact in a 300 nm baseline (a drag and a
+    # viscosity concealed, known contact), named strong. A Hertz law as read off a recording, noise 0.25 nN.
+    from ptwin.physics.elastic import hertz_force
+    from ptwin.physics.terms import VOCABULARY
+
+    rho, modulus, noise = 10e-6, 1.5e4, 0.25e-9
+    term = VOCABULARY["contact_offset"](rho, delta=delta)
+    reason = term.law_violation(lambda depth: hertz_force(depth, modulus, rho), lambda: modulus, noise)
+    assert (reason is not None) == contradicted
+    if contradicted:
+        assert f"delta = {delta * 1e9:.3g} nm" in reason
+
+
 def test_the_pore_term_says_where_its_force_stops_depending_on_k(tmp_path, coarse_cache):
     # Undrained (relaxation time ≫ the recordings), F_p → M·U·R whatever K is: the note must fire exactly there.
     basis_path = next(coarse_cache.glob("*.pt"))

@@ -143,13 +143,19 @@ def fit_physics(
     params, param_std, corr, violations, degenerate, implausible, without = {}, {}, {}, {}, {}, {}, {}
     with torch.no_grad():
         fitted = model(samples) if model.terms else None
+
+    def law(depth: float) -> float:
+        with torch.no_grad():
+            return model.elastic(torch.tensor([depth], dtype=torch.float64, device=fitted.device)).item()
+
     for name, term in model.terms.items():
         params[name] = term.values()
         raw = {p: f"terms.{name}.{term.raw_name(p)}" for p in term.PARAMS}
         param_std[name] = term.physical_std({term.raw_name(p): raw_std.get(key, 0.0) for p, key in raw.items()})
         corr[name] = {p: raw_corr.get(key, 0.0) for p, key in raw.items()}
         nothing, without[name] = _without_term(model, fitted, name, samples, index)
-        for found, reason in ((violations, term.violation()), (degenerate, nothing)):
+        contradicted = term.violation() or term.law_violation(law, model.hertz_modulus, model.reference.noise_std)
+        for found, reason in ((violations, contradicted), (degenerate, nothing)):
             if reason:
                 found[name] = reason
         if term.implausible():
