@@ -66,6 +66,7 @@ class Case:
     identifiable: bool = True  # False: the setting cannot name it; right is claiming nothing
     params_within: float | None = None  # named right also needs each concealed parameter within this fraction
     proposes: bool = False  # confounded right also needs a proposed next experiment for the concealed term
+    noise_in_meta: bool = False  # the noise std written in meta.yaml, as a lab that measured it writes it
 
 
 ORIGINAL = [
@@ -126,9 +127,21 @@ REALISM = [
     Case("pore, soft", {"pore_pressure_relaxation": {"M": 5.0e3}}, SOFT),
     Case("strain perm., soft", {"strain_dependent_permeability": {"m": 2.0}}, SOFT),
     Case("outside: drift, correlated", {"force_drift": {"rate": 0.3e-9}}, CORRELATED),
-    # Known contacts and a short baseline: a contact moved where the recording says none can be took both.
+    # Known contacts, a short baseline and the noise std in meta.yaml, as p09 has them. A contact moved where the
+    # recording says none can be took the drag and the viscosity. p09's pair at half its values is still missed
+    # (README "make discover-bench"): the base model's residual passes for noise (2.5× its std in RMS) and the
+    # pair, 58 BIC below the best single with both values right, is beyond it in no shape the test can prove.
     Case(
-        "pair drag + viscosity, AR(1)", {"cantilever_drag": {"b": 1.0e-4}, "solid_viscosity": {"gamma": 12.0}}, SEEDED
+        "pair drag + viscosity, AR(1)",
+        {"cantilever_drag": {"b": 1.0e-4}, "solid_viscosity": {"gamma": 12.0}},
+        SEEDED,
+        noise_in_meta=True,
+    ),
+    Case(
+        "pair viscosity + strain perm., AR(1)",
+        {"solid_viscosity": {"gamma": 6.0}, "strain_dependent_permeability": {"m": 1.0}},
+        SEEDED,
+        noise_in_meta=True,
     ),
 ]
 # The loop: approach curves that leave candidates confounded; the proposed next experiments (the confounded
@@ -370,7 +383,7 @@ def main() -> None:
                     name, *_, after, _, _, rounds, seconds, right = rows[-1]
                     print(f"loop: {case.name}: {after} after {rounds} rounds ({right}, {seconds:.1f} s)", flush=True)
                     continue
-                d, seconds = diagnose(experiment, folder, overrides)
+                d, seconds = diagnose(experiment, folder, overrides, case.noise_in_meta)
                 rows.append(row(case, experiment, d, seconds))
                 if not case.effects:
                     alarms.append(d["mismatch"]["detected"] or bool(d["left_out"]))

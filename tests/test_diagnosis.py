@@ -252,10 +252,14 @@ def ten_samples():
     return samples, Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))
 
 
-@pytest.mark.parametrize(("max_terms", "pair_whiteness", "largest"), [(3, 50.0, 3), (3, 2.0, 2), (1, 50.0, 1)])
+@pytest.mark.parametrize(
+    ("max_terms", "pair_whiteness", "exhaustive", "largest"),
+    [(3, 50.0, False, 3), (3, 2.0, False, 2), (1, 50.0, False, 1), (3, 2.0, True, 3)],
+)
 def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_structure(
-    monkeypatch, max_terms, pair_whiteness, largest
+    monkeypatch, max_terms, pair_whiteness, exhaustive, largest
 ):
+    # exhaustive: what ``diagnose`` asks for before it says "unexplained" (every subset weighed first)
     import ptwin.diagnosis.name as name
 
     fitted, starts = [], []
@@ -271,7 +275,9 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
     samples, split = ten_samples()
-    name.fit_candidates(None, samples, split, ["a", "b", "c"], max_terms, 1, 50, ABOVE_FIVE, progress=lambda line: None)
+    name.fit_candidates(
+        None, samples, split, ["a", "b", "c"], max_terms, 1, 50, ABOVE_FIVE, lambda line: None, exhaustive=exhaustive
+    )
     assert max(len(t) for t in fitted) == largest
     assert sum(len(t) == largest for t in fitted) == {1: 3, 2: 3, 3: 1}[largest]
     # the base model fitted first, every subset with terms given it (where it starts: ``fit_with_starts``)

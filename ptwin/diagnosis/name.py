@@ -85,6 +85,7 @@ def fit_candidates(
     fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
     bic_margin: float = math.inf,
     reused: dict[tuple[str, ...], Candidate] | None = None,
+    exhaustive: bool = False,
 ) -> dict[tuple[str, ...], Candidate]:
     """Fits of the base model, every single term and, while the best usable subset of k − 1 terms (none
     usable: the best smaller one) leaves structure, every subset of k ≤ ``max_terms`` terms, on the train
@@ -94,7 +95,8 @@ def fit_candidates(
 
     ``fitted``: fits already made on the same train split (e.g. the base model's), reused as they are;
     ``reused``: candidates already made of them on these samples (``diagnose.first_fits``'), taken whole and
-    not listed again. Every other candidate makes a line of ``progress``.
+    not listed again; ``exhaustive``: every subset of up to ``max_terms`` terms, whatever the smaller ones leave.
+    Every other candidate makes a line of ``progress``.
     """
     fitted, reused = fitted or {}, reused or {}
     judged = split.judged(samples), split.pinning(samples)
@@ -127,7 +129,7 @@ def fit_candidates(
         previous = previous or [c for t, c in candidates.items() if len(t) < size and c.usable]
         best = min(previous, key=lambda c: c.fit.bic, default=None)
         grown = list(itertools.combinations(terms, size))
-        if size > 1 and best is not None and not best.leaves_structure(test):
+        if size > 1 and best is not None and not best.leaves_structure(test) and not exhaustive:
             preferred = _preferred(candidates, size - 1, bic_margin) if base_within_noise else []
             if preferred and any(e.beyond for e in shape_evidence(candidates, test).values()):
                 preferred = []  # a smaller subset is beyond the noise in its own shape: the larger are not weighed
