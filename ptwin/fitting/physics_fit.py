@@ -146,7 +146,7 @@ def fit_physics(
 
     def law(depth: float) -> float:
         with torch.no_grad():
-            return model.elastic(torch.tensor([depth], dtype=torch.float64, device=fitted.device)).item()
+            return model.elastic(torch.tensor([depth], dtype=torch.float64, device=samples.depth.device)).item()
 
     for name, term in model.terms.items():
         params[name] = term.values()

@@ -370,8 +370,8 @@ class ContactOffset(Term):
                     f"delta = {delta * 1e9:.3g} nm puts the contact {-delta * 1e9:.3g} nm before the recorded one, "
                     f"where a solid of the law's E* would push {excess * 1e9:.3g} nN more than the recording does"
                 )
-        elif law(delta) > limit:
-            return f"delta = {delta * 1e9:.3g} nm puts the contact where the recording pushes {law(delta) * 1e9:.3g} nN"
+        elif (pushed := law(delta)) > limit:
+            return f"delta = {delta * 1e9:.3g} nm puts the contact where the recording pushes {pushed * 1e9:.3g} nN"
         return None
 
     def depth_shift(self):
