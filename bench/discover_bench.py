@@ -143,6 +143,14 @@ REALISM = [
         SEEDED,
         noise_in_meta=True,
     ),
+    # p07's pore beside a viscosity: the viscosity alone passes the whole-residual test, the pore alone does
+    # nothing, and the pair was never fitted until the best single was grown by one term each (the forward step).
+    Case(
+        "pair pore + viscosity, AR(1)",
+        {"pore_pressure_relaxation": {"M": 5.0e4}, "solid_viscosity": {"gamma": 12.0}},
+        SEEDED,
+        noise_in_meta=True,
+    ),
 ]
 # The loop: approach curves that leave candidates confounded; the proposed next experiments (the confounded
 # groups' and those of terms named below strong), recorded from the same truth; the diagnosis again, for at

@@ -284,6 +284,38 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     assert starts[0] is None and all(base is not None and base.terms == () for base in starts[1:])
 
 
+@pytest.mark.parametrize(("single_chi_square", "pairs"), [(1000.0, [("a", "b"), ("a", "c")]), (1995.0, [])])
+def test_where_the_best_single_term_leaves_no_structure_it_is_grown_by_one_term(monkeypatch, single_chi_square, pairs):
+    """The base model leaves structure (W 50 against 5) and every single term leaves none (W 2): a term can still
+    hide beside a larger one (a pore relaxation beside a viscosity, the pore alone at M → ∞), so the best single,
+    686 BIC below the base model, is grown by one term each, and b + c is not fitted. Where no single term beats
+    the base model by the BIC margin, nothing is grown."""
+    import ptwin.diagnosis.name as name
+
+    fitted = []
+
+    def fit_with_starts(make_model, subset, samples, index, iterations, base=None):
+        fitted.append(subset)
+        chi_square = {(): 2000.0, ("a",): single_chi_square, ("b",): 1998.0, ("c",): 1998.0}.get(subset, 900.0)
+        fit = candidate(subset, chi_square, 1.0).fit
+        fit.model = lambda samples: samples.force + len(subset)  # its residual tells its size
+        return fit
+
+    def fit_from(make_model, subset, start, samples, index, iterations, reference_free, grown=False):
+        assert start.terms == ("a",) and grown  # one fit, from the best single's optimum
+        return fit_with_starts(make_model, subset, samples, index, iterations)
+
+    whiteness = {0: 50.0, 1: 2.0, 2: 2.0}
+    monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
+    monkeypatch.setattr(name, "fit_from", fit_from)
+    monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: whiteness[int(residual[0])])
+    samples, split = ten_samples()
+    name.fit_candidates(
+        None, samples, split, ["a", "b", "c"], 2, 1, 50, ABOVE_FIVE, lambda line: None, None, bic_margin=10.0
+    )
+    assert [t for t in fitted if len(t) == 2] == pairs
+
+
 def test_each_fit_is_one_line_of_progress_though_the_diagnosis_reuses_the_first_fits(monkeypatch):
     # ``first_fits`` fits the base model and the single terms, ``diagnose`` reuses them and fits the pairs: each
     # subset is said once, the base model too where it was handed in already fitted (``identify``'s).

@@ -357,11 +357,15 @@ def kept_first(fit: PhysicsFit) -> tuple[bool, float]:
     return not fit.physical, fit.chi_square
 
 
-def started_at(make_model, terms: tuple[str, ...], start: PhysicsFit) -> ForceModel:
+def started_at(
+    make_model, terms: tuple[str, ...], start: PhysicsFit, added: dict[str, dict[str, float]] | None = None
+) -> ForceModel:
     """The model of ``terms`` at ``start``'s optimum: K, the contact corrections and the terms both have at
-    ``start``'s values, a term ``start`` lacks where it does nothing (``Term.absent_values``); a term only
-    ``start`` has is left out. From a smaller model's optimum, its cost is that model's."""
-    values = {t: start.params[t] if t in start.params else VOCABULARY[t].absent_values() for t in terms}
+    ``start``'s values, a term ``start`` lacks at its values in ``added``, else where it does nothing
+    (``Term.absent_values``); a term only ``start`` has is left out. From a smaller model's optimum with nothing
+    ``added``, its cost is that model's."""
+    added = added or {}
+    values = {t: start.params[t] if t in start.params else added.get(t, VOCABULARY[t].absent_values()) for t in terms}
     model = make_model(terms, values, start.permeability)
     if model.contact is not None:
         model.contact.load_state_dict(start.model.contact.state_dict())
@@ -376,12 +380,24 @@ def fit_from(
     index: torch.Tensor,
     iterations: int,
     reference_free: bool | None,
+    grown: bool = False,
 ) -> PhysicsFit:
     """``fit_physics`` of the model of ``terms`` from ``start``'s optimum (``started_at``), the reference's contact
     correction fitted or held as ``reference_free`` says (``fit_physics``). LM accepts only steps that lower the
     cost: from a smaller model's optimum the fit ends no worse than that model, and from a larger one's no worse
-    than the cost there with the larger one's extra term taken out (``PhysicsFit.chi_square_without``)."""
-    model = started_at(make_model, terms, start)
+    than the cost there with the larger one's extra term taken out (``PhysicsFit.chi_square_without``).
+
+    ``grown``: each term ``start`` lacks begins at the cheapest of its starting values (``Term.STARTS``), not where
+    it does nothing, where its gradient can be nil (a pore relaxation at M → ∞) and LM would leave it: one fit
+    where ``fit_with_starts`` makes one a start (the forward step of ``diagnosis.name.fit_candidates``). Such a
+    fit may end above ``start``'s (``diagnosis.name._nest`` then refits it as above)."""
+    if grown:
+        added = [t for t in terms if t not in start.params]
+        combos = itertools.product(*(VOCABULARY[t].STARTS for t in added))
+        models = (started_at(make_model, terms, start, dict(zip(added, combo))) for combo in combos)
+        model = cheapest(models, samples, index)
+    else:
+        model = started_at(make_model, terms, start)
     return fit_physics(model, samples, index, iterations, reference_free=reference_free)
 
 
