@@ -356,7 +356,7 @@ def test_fits_that_do_not_nest_are_fitted_again_from_their_neighbours_optimum(mo
     def fit_with_starts(make_model, subset, samples, index, iterations, base=None):
         return fake(subset, chi_square[subset], {"a": 1600.0, "b": 1990.0} if len(subset) == 2 else None)
 
-    def fit_from(make_model, subset, start, samples, index, iterations, reference_free):
+    def fit_from(make_model, subset, start, samples, index, iterations, reference_free, grown=False):
         refits.append((subset, start.terms))
         if len(subset) > len(start.terms):
             return fake(subset, start.chi_square - 10.0)

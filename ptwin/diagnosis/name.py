@@ -120,17 +120,12 @@ def fit_candidates(
         figures = f"BIC {candidate.fit.bic:12.1f}  val RMS {candidate.val_rmse * 1e9:7.3f} nN" if candidate.fit else ""
         progress(f"  {name:<55s} {figures:<37s}  ({candidate.state}){how}")
 
-    def refit(subset, start: tuple[str, ...]) -> PhysicsFit | None:
+    def refit(subset, start: tuple[str, ...], grown: bool = False) -> PhysicsFit | None:
         try:
-            return fit_from(make_model, subset, candidates[start].fit, samples, split.train, iterations, follow)
+            fit = candidates[start].fit
+            return fit_from(make_model, subset, fit, samples, split.train, iterations, follow, grown=grown)
         except FitError:
-            return None
-
-    def grow(subset, start: Candidate) -> PhysicsFit | None:
-        try:
-            return fit_from(make_model, subset, start.fit, samples, split.train, iterations, follow, grown=True)
-        except FitError:
-            return None  # fitted from every start instead
+            return None  # ``add`` fits it from every start instead
 
     add(())
     follow = None if candidates[()].fit is None else candidates[()].fit.reference_free
@@ -153,11 +148,8 @@ def fit_candidates(
             if not grown:
                 break
         for subset in grown:
-            if forward is None:
-                add(subset)
-            else:
-                fit = grow(subset, forward)
-                add(subset, fit, f" grown from {' + '.join(forward.terms)}" if fit else "")
+            fit = None if forward is None else refit(subset, forward.terms, grown=True)
+            add(subset, fit, f" grown from {' + '.join(forward.terms)}" if fit else "")
         _nest(candidates, refit, add)
         base_within_noise = not candidates[()].leaves_structure(test)
     return candidates
