@@ -796,3 +796,27 @@ def test_the_identification_table_gives_no_k_the_data_cannot_fix():
     }
     rows = [row[1] for row in summary_rows({"stages": stages})]
     assert rows == ["no fluid force: ≥ 1e-09", "1.733e-17 (gamma < 0: not physical)", "4.83e-16"]
+
+
+@pytest.mark.parametrize(
+    ("pair_chi_square", "pair_permeability", "covered"),
+    [(990.0, 2.0e-16, True), (1010.0, 2.0e-16, False), (990.0, 3.05e-16, False)],
+)
+def test_k_s_interval_covers_a_larger_model_the_information_criterion_prefers_but_the_selection_pruned(
+    pair_chi_square, pair_permeability, covered
+):
+    # p07's pore beside a power law (α 0.1): the pair 8.5 BIC below the power law alone, the pore pruned (short of
+    # the margin), the power law's K 14% off with an interval that excluded the truth the pair's K stood at. A
+    # larger model the criterion does not prefer, or one with the same K, widens nothing.
+    from ptwin.diagnosis import diagnose
+
+    chosen, pair = candidate(("a",), 1000.0, 1e-9), candidate(("a", "b"), pair_chi_square, 1e-9)
+    pair.fit.permeability = pair_permeability
+    candidates = {(): candidate((), 2000.0, 1e-9), ("a",): chosen, ("b",): candidate(("b",), 1900.0, 1e-9)}
+    candidates[("a", "b")] = pair
+    assert diagnose._not_ruled_out(candidates, ("a",)) == [("a", "b")] * covered
+    assert diagnose._not_ruled_out(candidates, ()) == []
+    if covered:
+        words = diagnose._not_ruled_out_words(candidates, ("a",), ("a", "b"))
+        assert words.startswith("K's interval covers K of a + b (2e-16 m² against 3e-16): the information criterion")
+        assert "prefers it by 3.1 BIC, though b is not proven beside a" in words
