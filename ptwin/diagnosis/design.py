@@ -45,9 +45,8 @@ from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.noise import NoiseModel
 from ptwin.data.recordings import SEGMENTS, Meta, RecordingSet
 from ptwin.fitting.lm import FitError
-from ptwin.fitting.physics_fit import PhysicsFit, cheapest, fit_physics
+from ptwin.fitting.physics_fit import PhysicsFit, cheapest, fit_physics, term_starts
 from ptwin.physics.samples import Samples
-from ptwin.physics.terms import VOCABULARY
 from ptwin.synth.simulator import SIMULATED, CurveSimulation, Experiment, Hold, simulate_curve
 
 TARGET = 10.0  # separation [noise units] for a strong verdict
@@ -289,9 +288,8 @@ class ExperimentDesign:
         reference curve's contact correction fitted or held as ``fit`` had it (the diagnosis's candidates follow
         the base model's: one freed in a candidate and held in its rival would tilt their comparison)."""
         if starts is None:
-            combos = itertools.product(*(VOCABULARY[t].STARTS for t in fit.terms))
             starts = [fit.params] + [
-                {t: {**fit.params[t], **start} for t, start in zip(fit.terms, combo)} for combo in combos
+                {t: {**fit.params[t], **values[t]} for t in fit.terms} for values in term_starts(fit.terms)
             ]
         models = (self.make_model(fit.terms, values, fit.permeability) for values in starts)
         try:

@@ -329,7 +329,7 @@ def fit_with_starts(
     """
     if not terms:
         return fit_physics(make_model(terms), samples, index, iterations)
-    starts = [dict(zip(terms, combo)) for combo in itertools.product(*(VOCABULARY[t].STARTS for t in terms))]
+    starts = term_starts(terms)
     fluid_off = () if all(VOCABULARY[t].fluid_only() for t in terms) else (PLAUSIBLE_PERMEABILITY[1],)
     hidden = base is not None and hidden_in_contacts(terms)
     follow = None if base is None else base.reference_free
@@ -350,6 +350,11 @@ def fit_with_starts(
     if not fits:
         raise why
     return min(fits, key=kept_first)
+
+
+def term_starts(terms) -> list[dict[str, dict[str, float]]]:
+    """Every combination of the terms' starting values (``Term.STARTS``), as {term: its values}."""
+    return [dict(zip(terms, combo)) for combo in itertools.product(*(VOCABULARY[t].STARTS for t in terms))]
 
 
 def kept_first(fit: PhysicsFit) -> tuple[bool, float]:
@@ -392,10 +397,8 @@ def fit_from(
     where ``fit_with_starts`` makes one a start (the forward step of ``diagnosis.name.fit_candidates``). Such a
     fit may end above ``start``'s (``diagnosis.name._nest`` then refits it as above)."""
     if grown:
-        added = [t for t in terms if t not in start.params]
-        combos = itertools.product(*(VOCABULARY[t].STARTS for t in added))
-        models = (started_at(make_model, terms, start, dict(zip(added, combo))) for combo in combos)
-        model = cheapest(models, samples, index)
+        added = term_starts([t for t in terms if t not in start.params])
+        model = cheapest((started_at(make_model, terms, start, values) for values in added), samples, index)
     else:
         model = started_at(make_model, terms, start)
     return fit_physics(model, samples, index, iterations, reference_free=reference_free)
