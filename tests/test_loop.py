@@ -29,7 +29,7 @@ def test_relaxation_on_a_soft_set_is_named_strong_once_the_proposed_experiments_
     for round in range(3):
         folder = tmp_path / f"round{round}"
         write_recordings(folder, *simulate(replace(truth, holds=recorded)))
-        d = run(folder, coarse_cache, tmp_path / f"run{round}", *QUICK).diagnosis
+        d = run(folder, coarse_cache, tmp_path / f"run{round}", *QUICK, figures=True).diagnosis
         if [(e["term"], e["confidence"]) for e in d["left_out"]] == [("solid_relaxation", "strong")]:
             break
         groups = [g for g in d["confounded"] if "solid_relaxation" in g["terms"]]

@@ -10,22 +10,23 @@ from tests.conftest import run
 
 
 @pytest.mark.parametrize(
-    "effects",
+    ("effects", "figures"),
     [
-        {"solid_relaxation": {"g": 0.2, "tau": 0.5}},
-        {"pore_pressure_relaxation": {"M": 3.0e4}},
-        {"power_law_rheology": {"alpha": 0.1}},
+        pytest.param({"solid_relaxation": {"g": 0.2, "tau": 0.5}}, True, id="solid_relaxation-drawn"),
+        pytest.param({"pore_pressure_relaxation": {"M": 3.0e4}}, False, id="pore_pressure_relaxation"),
+        pytest.param({"power_law_rheology": {"alpha": 0.1}}, False, id="power_law_rheology"),
     ],
-    ids=lambda effects: next(iter(effects)),
 )
-def test_one_ramp_and_hold_names_the_relaxation_and_fixes_k(effects, tmp_path, coarse_cache):
+def test_one_ramp_and_hold_names_the_relaxation_and_fixes_k(effects, figures, tmp_path, coarse_cache):
     # 2 kHz: the pore pressure drains in τ_p ≈ 10 ms here, 20 samples (at 1 kHz its 10 samples are too few
     # for the structure test's 50-sample blocks, and nothing is named).
     truth = Experiment(
         base_speeds=(), holds=(Hold(3e-6, 2.0, 10e-6),), z_start=-3e-6, sample_rate=2000.0, effects=effects
     )
     write_recordings(tmp_path / "set", *simulate(truth))
-    d = run(tmp_path / "set", coarse_cache, tmp_path / "run", "diagnosis.design=false").diagnosis
+    d = run(tmp_path / "set", coarse_cache, tmp_path / "run", "diagnosis.design=false", figures=figures).diagnosis
+    assert (tmp_path / "run" / "holds_force_time.png").is_file() == figures
+    assert ("![holds_force_time](holds_force_time.png)" in (tmp_path / "run" / "report.md").read_text()) == figures
     assert [entry["term"] for entry in d["left_out"]] == list(effects)
     assert d["permeability"]["corrected"] == pytest.approx(truth.permeability, rel=0.05)
     assert any("relaxes by" in note for note in d["notes"])

@@ -38,6 +38,7 @@ def test_a_toy_term_is_fitted_selected_reported_and_plotted(tmp_path, coarse_cac
         f"diagnosis.terms=[solid_viscosity,{RateStiffening.name}]",
         "optim.hybrid.regularisations=[1.0e-2]",
         "optim.hybrid.iterations=10",
+        figures=True,
     )
     named = outcome.diagnosis["left_out"]
     assert [entry["term"] for entry in named] == [RateStiffening.name]

@@ -84,18 +84,19 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     outcome = train_twin(prepared, base_k, noise, settings, output_dir, log.on_step, progress)
     log.end_training()
     diagnosis = diagnose_set(prepared, identification, outcome.twin, settings, progress)
-    corrected_per_curve = _corrected_per_curve(prepared, diagnosis, settings.optim.physics_fit.iterations)
-    figures = save_figures(
-        output_dir,
-        samples,
-        split,
-        identification,
-        outcome.twin,
-        diagnosis,
-        corrected_per_curve,
-        prepared.rate,
-        progress,
-    )
+    figures = {}
+    if settings.figures:
+        figures = save_figures(
+            output_dir,
+            samples,
+            split,
+            identification,
+            outcome.twin,
+            diagnosis,
+            _corrected_per_curve(prepared, diagnosis, settings.optim.physics_fit.iterations),
+            prepared.rate,
+            progress,
+        )
     results = _results(prepared, identification, settings)
     results["stages"]["hybrid"] = hybrid_stage(outcome, samples, split, settings.optim.hybrid)
     results["noise_floor"] = noise
@@ -323,7 +324,7 @@ def _design(prepared: Prepared, settings: Settings) -> ExperimentDesign:
 
 
 def _corrected_per_curve(prepared: Prepared, diagnosis: Diagnosis, iterations: int):
-    """K per curve with the named terms frozen at their global values (None when nothing was named)."""
+    """K per curve with the named terms frozen at their global values, for figure 5 (None when nothing was named)."""
     if not diagnosis.chosen:
         return None
     values = diagnosis.corrected.fit.params

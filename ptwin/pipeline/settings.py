@@ -75,6 +75,7 @@ class Settings:
     cache_dir: str = ".cache/ptwin"  # where PGD bases are kept, keyed by their config hash
     ckpt_path: str | None = None  # a checkpoint.pt to resume from
     permeability: float = 2.0e-16  # starting K [m²]
+    figures: bool = True  # draw the PNG figures (false: tables, report and diagnosis only; 1.5–2.5 s less a set)
 
 
 @dataclass

@@ -80,7 +80,9 @@ def write_report(output_dir: Path, results: dict, payload: dict, diagnosis: Diag
     lines += [*(f"- {note}" for note in payload["notes"]), ""]
     lines += _candidates(diagnosis)
     lines += _fit(payload, diagnosis.permeability) + _chain(results)
-    lines += ["## Figures", "", *(f"![{name}]({name}.png)" for name in figures)]
+    none = "None drawn (`figures=false`, or none could be: the run's output says why)."
+    drawn = [f"![{name}]({name}.png)" for name in figures] or [none]
+    lines += ["## Figures", "", *drawn]
     (output_dir / "report.md").write_text("\n".join(lines) + "\n")
 
 
