@@ -378,7 +378,8 @@ def main() -> None:
     warnings.filterwarnings("ignore", category=RuntimeWarning)
     register()
     cache = os.environ.get("PTWIN_CACHE", str(ROOT / ".cache" / "ptwin"))
-    overrides = [f"pgd={args.pgd}", f"cache_dir={cache}"]
+    # every run lands in a scratch folder, deleted after its row: figures would be drawn for nobody
+    overrides = [f"pgd={args.pgd}", f"cache_dir={cache}", "figures=false"]
     for suite in SUITES if args.suite == "all" else [s for s in SUITES if s == args.suite]:
         cases = [c for c in SUITES[suite] if not args.only or any(word in c.name for word in args.only)]
         rows, alarms = [], []
