@@ -135,7 +135,7 @@ def fit_candidates(
         previous = [c for t, c in candidates.items() if len(t) == size - 1 and c.usable]
         previous = previous or [c for t, c in candidates.items() if len(t) < size and c.usable]
         best = min(previous, key=lambda c: c.fit.bic, default=None)
-        grown = list(itertools.combinations(terms, size))
+        subsets = list(itertools.combinations(terms, size))
         forward = None  # the subset the forward step grows, from its optimum
         if size > 1 and best is not None and not best.leaves_structure(test) and not exhaustive:
             preferred = _preferred(candidates, size - 1, bic_margin)
@@ -144,10 +144,10 @@ def fit_candidates(
                 preferred = [best.terms] if forward else []
             elif preferred and any(e.beyond for e in shape_evidence(candidates, test).values()):
                 preferred = []  # a smaller subset is beyond the noise in its own shape: the larger are not weighed
-            grown = [subset for subset in grown if any(set(p) <= set(subset) for p in preferred)]
-            if not grown:
+            subsets = [subset for subset in subsets if any(set(p) <= set(subset) for p in preferred)]
+            if not subsets:
                 break
-        for subset in grown:
+        for subset in subsets:
             fit = None if forward is None else refit(subset, forward.terms, grown=True)
             add(subset, fit, f" grown from {' + '.join(forward.terms)}" if fit else "")
         _nest(candidates, refit, add)
