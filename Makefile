@@ -24,6 +24,7 @@ bench: $(STAMP)
 	$(PY) -m bench.map_bench
 	$(PY) bench/pgd_bench.py
 	$(PY) -m bench.device_bench
+	$(PY) -m bench.suite_bench
 
 discover-bench: $(STAMP)
 	$(PY) -m bench.discover_bench
