@@ -1,15 +1,21 @@
-"""The diagnosis names what was concealed, says nothing on clean data, and improves the fit."""
+"""The diagnosis names what was concealed, says nothing on clean data, and improves the fit; and what train.py's
+stages find on the same runs (the session's shared runs are read in this one file: pytest-xdist gives a file to
+one worker, and each worker that reads a shared run makes it)."""
 
 import collections
 import json
 import math
 import re
+import struct
 
 import pytest
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from ptwin.diagnosis.locate import whiteness
 from ptwin.fitting.split import Split
 from tests.conftest import run, simulated_set
+
+TRUE_K = 2.0e-16
 
 
 def test_whiteness_is_one_for_noise_and_large_for_structure():
@@ -820,3 +826,32 @@ def test_k_s_interval_covers_a_larger_model_the_information_criterion_prefers_bu
         words = diagnose._not_ruled_out_words(candidates, ("a",), ("a", "b"))
         assert words.startswith("K's interval covers K of a + b (2e-16 m² against 3e-16): the information criterion")
         assert "prefers it by 3.1 BIC, though b is not proven beside a" in words
+
+
+def test_clean_data_every_stage_finds_k_and_nothing_else(clean_run):
+    outcome, output = clean_run
+    stages, noise = outcome.results["stages"], outcome.results["noise_floor"]
+    for name in ("elastic_darcy", "viscous", "hybrid"):
+        assert stages[name]["permeability"] == pytest.approx(TRUE_K, rel=0.01), name
+    gamma = stages["viscous"]["params"]["solid_viscosity"]
+    assert abs(gamma["gamma"]) < 3 * stages["viscous"]["param_std"]["solid_viscosity"]["gamma"] + 0.05
+    assert stages["hybrid"]["network_rms"] < noise
+    assert stages["hybrid"]["network_parameters"] == 25
+    for name in (
+        "results.json",
+        "diagnosis.json",
+        "report.md",
+        "checkpoint.pt",
+        "fig4_apparent_permeability_depth.png",
+    ):
+        assert (output / name).is_file(), name
+    events = EventAccumulator(str(output / "tensorboard"), size_guidance={"images": 0}).Reload()
+    (image,) = events.Images("fig4_apparent_permeability_depth")
+    png = (output / "fig4_apparent_permeability_depth.png").read_bytes()
+    assert image.encoded_image_string == png  # the saved figure as it is
+    assert (image.width, image.height) == struct.unpack(">II", png[16:24])  # the PNG header's IHDR
+
+
+def test_stage_two_recovers_a_concealed_viscosity(viscous_run):
+    gamma = viscous_run.results["stages"]["viscous"]["params"]["solid_viscosity"]["gamma"]
+    assert gamma == pytest.approx(5.0, rel=0.05)
