@@ -3,6 +3,7 @@ gives K per spot and the term's region; a broken spot is a row, not a stop; Dask
 a killed map resumes; and the map's geometry (positions, regions) is read right."""
 
 import json
+import shutil
 import subprocess
 import sys
 
@@ -123,6 +124,24 @@ def test_a_killed_map_resumes_from_the_spots_already_written(serial_map, generat
     assert (output / "spots" / "spot_000_000.json").stat().st_mtime_ns == kept
     columns = [c for c in resumed.table.columns if c != "seconds"]
     pd.testing.assert_frame_equal(resumed.table[columns], result.table[columns])
+
+
+def test_figures_false_draws_no_map_and_keeps_the_spots_a_run_with_figures_diagnosed(
+    serial_map, generated_map, coarse_cache, tmp_path
+):
+    """A spot draws nothing, so ``figures`` is no part of what its stored result was computed with: the map's
+    PNGs are left out and every spot is taken as it was written."""
+    result, output = serial_map
+    shutil.copytree(output / "spots", tmp_path / "spots")
+    lines = []
+    settings = map_settings(generated_map[0], coarse_cache, "map.scheduler=serial", "figures=false")
+    again = run_map(settings, tmp_path, progress=lines.append)
+    assert any("17 already diagnosed" in line and "0 to run" in line for line in lines)
+    assert not list(tmp_path.glob("*.png"))
+    report = (tmp_path / "report.md").read_text()
+    assert "![" not in report and "No maps drawn (`figures=false`)" in report
+    columns = [c for c in again.table.columns if c != "seconds"]
+    pd.testing.assert_frame_equal(again.table[columns], result.table[columns])
 
 
 def test_dask_with_two_workers_gives_the_serial_table(serial_map, generated_map, coarse_cache, tmp_path):

@@ -68,7 +68,7 @@ def run_map(settings: MapRunSettings, output_dir: Path, progress: Callable[[str]
             bar.update()
     table = pd.DataFrame([done[spot.name] for spot in spots], columns=list(COLUMNS))
     summary = summarise_map(table)
-    write_map_outputs(output_dir, table, summary)
+    write_map_outputs(output_dir, table, summary, settings.figures)
     for sentence in summary["sentences"]:
         progress(sentence)
     progress(f"map results in {output_dir}: spots.csv, map_summary.json, report.md")
@@ -96,6 +96,7 @@ def _fingerprint(settings: Settings, hybrid: bool) -> str:
     """What a stored spot result was computed with: the spot settings (not the map's path) and the twin."""
     values = asdict(settings)
     values["data"].pop("path")
+    values.pop("figures")  # a spot draws none: the map's own PNGs are all it decides
     text = json.dumps({"settings": values, "hybrid": hybrid}, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 

@@ -21,11 +21,20 @@ MICRO = 1e6
 NOT_DIAGNOSED = "spot not diagnosed"
 
 
-def write_map_outputs(output_dir: Path, table: pd.DataFrame, summary: dict) -> None:
-    """Everything a map run leaves beside its per-spot results."""
+def write_map_outputs(output_dir: Path, table: pd.DataFrame, summary: dict, figures: bool = True) -> None:
+    """Everything a map run leaves beside its per-spot results; ``figures``: the maps as PNG too."""
     table.to_csv(output_dir / "spots.csv", index=False, float_format="%.9g")
     (output_dir / "map_summary.json").write_text(json.dumps(summary, indent=2))
-    figures = {
+    drawn = _maps(table) if figures else {}
+    for name, figure in drawn.items():
+        figure.savefig(output_dir / f"{name}.png", dpi=110)
+        plt.close(figure)
+    (output_dir / "report.md").write_text(_report(table, summary, list(drawn)))
+
+
+def _maps(table: pd.DataFrame) -> dict:
+    """The map's figures by file name: K, each spot's verdict, the base model's RMS over the noise."""
+    return {
         "map_permeability": _map(
             table,
             np.log10(table["permeability"].astype(float)),
@@ -35,10 +44,6 @@ def write_map_outputs(output_dir: Path, table: pd.DataFrame, summary: dict) -> N
         "map_verdict": _verdict_map(table),
         "map_base_rmse": _map(table, table["base_rmse_over_noise"].astype(float), "base model RMS / noise std"),
     }
-    for name, figure in figures.items():
-        figure.savefig(output_dir / f"{name}.png", dpi=110)
-        plt.close(figure)
-    (output_dir / "report.md").write_text(_report(table, summary, list(figures)))
 
 
 def _layout(table: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, list[float] | None]:
@@ -113,7 +118,7 @@ def _report(table: pd.DataFrame, summary: dict, figures: list[str]) -> str:
     lines += ["## Verdicts", "", "| verdict | spots |", "|---|---|"]
     lines += [f"| {name} | {count} |" for name, count in summary["verdicts"].items()]
     lines += ["", *summary["sentences"], ""]
-    lines += [f"![{name}]({name}.png)" for name in figures]
+    lines += [f"![{name}]({name}.png)" for name in figures] or ["No maps drawn (`figures=false`)."]
     failed = table[table["status"] != "ok"]
     if len(failed):
         lines += ["", "## Spots not diagnosed", "", "| spot | why |", "|---|---|"]
