@@ -164,7 +164,8 @@ class ForceModel(nn.Module):
         if permeability is None or permeability.numel() == 1:
             return self.reference.interpolate(self.elastic_nodes(permeability), depth)
         index, t = self.reference.bracket(depth)
-        return self.elastic_nodes(permeability, index) * (1 - t) + self.elastic_nodes(permeability, index + 1) * t
+        between = self.elastic_nodes(permeability, index) * (1 - t) + self.elastic_nodes(permeability, index + 1) * t
+        return between * self.reference.contact_weight(depth)
 
     def law_fall(self) -> float:
         """The most the elastic law F_el falls anywhere as the depth grows [N] (0 for a monotone law). A solid
