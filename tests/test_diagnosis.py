@@ -9,6 +9,7 @@ import re
 import struct
 
 import pytest
+import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from ptwin.diagnosis.locate import whiteness
@@ -555,6 +556,22 @@ def test_a_proposal_must_pass_the_validation_margin_over_everything_recorded():
     assert curves_needed(9.0, 81.0, 3000.0, 500, 0.10) == math.inf
     # A small separation needs (10 / separation)² curves for the information criterion.
     assert curves_needed(4.0, 16.0, 0.0, 10, 0.10) == 7
+
+
+def test_a_proposal_that_brings_the_sets_first_hold_is_two_curves():
+    # The grade's held-out test predicts each curve from a fit without it: a lone proposed hold left out leaves
+    # approaches alone (a soft pore set: 1.03× better held out, weak, after one hold; strong after two).
+    from types import SimpleNamespace
+
+    from ptwin.diagnosis.design import ExperimentDesign, Protocol
+
+    segment = torch.tensor([0, 0, 1])  # approach, approach, hold
+    approaches = SimpleNamespace(samples=SimpleNamespace(segment=segment), index=torch.tensor([0, 1]))
+    with_a_hold = SimpleNamespace(samples=SimpleNamespace(segment=segment), index=torch.tensor([0, 1, 2]))
+    hold, approach = Protocol(15e-6, 0.6e-6, hold=1.0), Protocol(45e-6, 0.6e-6)
+    assert ExperimentDesign._fewest(approaches, hold) == 2
+    assert ExperimentDesign._fewest(approaches, approach) == 1
+    assert ExperimentDesign._fewest(with_a_hold, hold) == 1
 
 
 def test_a_proposed_speed_is_one_a_person_sets():

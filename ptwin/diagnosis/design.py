@@ -139,7 +139,7 @@ class ExperimentDesign:
             for (i, j), (_, repeats) in refitted.items():
                 pair = (min(i, j), max(i, j))
                 prediction.pairs[pair] = max(prediction.pairs.get(pair, 0.0), repeats)
-            prediction.repeats = max(prediction.pairs.values())
+            prediction.repeats = max(*prediction.pairs.values(), self._fewest(prediction.protocol))
         verified = screened[:VERIFIED]
         reaching = [p for p in verified if p.repeats <= MAX_REPEATS]
         if reaching:
@@ -149,6 +149,14 @@ class ExperimentDesign:
         if best.separation < 1.0:
             return None  # refitted, the candidates explain every protocol of the menu alike
         return self._proposal(names, best), best
+
+    def _fewest(self, protocol: Protocol) -> float:
+        """The fewest curves of ``protocol`` the grade's held-out test can use: two where it brings a kind of segment
+        the set has none of (a hold to approaches). Each curve is predicted by a fit without it, and a fit without
+        the only hold answers for approaches alone (a soft pore set given one proposed hold: held out 1.03× better,
+        weak; two holds: strong)."""
+        recorded = {SEGMENTS[code] for code in self.samples.segment[self.index].unique().tolist()}
+        return 2.0 if {segment["segment"] for segment in protocol.segments()} - recorded else 1.0
 
     def _screen(self, names, fits: list[PhysicsFit]) -> list[Prediction]:
         """The predictions for every protocol of the menu the simulator can follow for all candidates (a
