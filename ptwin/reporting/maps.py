@@ -21,7 +21,7 @@ MICRO = 1e6
 NOT_DIAGNOSED = "spot not diagnosed"
 
 
-def write_map_outputs(output_dir: Path, table: pd.DataFrame, summary: dict, figures: bool = True) -> None:
+def write_map_outputs(output_dir: Path, table: pd.DataFrame, summary: dict, figures: bool) -> None:
     """Everything a map run leaves beside its per-spot results; ``figures``: the maps as PNG too."""
     table.to_csv(output_dir / "spots.csv", index=False, float_format="%.9g")
     (output_dir / "map_summary.json").write_text(json.dumps(summary, indent=2))
