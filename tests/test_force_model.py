@@ -71,6 +71,18 @@ def test_one_pass_over_samples_and_nodes_equals_the_elastic_law_first(tmp_path, 
         torch.testing.assert_close(one_pass[name], force, rtol=1e-12, atol=1e-21)
 
 
+def test_moving_the_reference_correction_leaves_every_other_curves_contact_where_it_was():
+    # The other curves' corrections are relative to the reference's: their contacts (offset + reference, what the
+    # rate forces see) stay, and only the reference's moves.
+    contact = ContactNuisance(("a", "b"))
+    with torch.no_grad():
+        contact.offsets.copy_(torch.tensor([10e-9, -5e-9], dtype=torch.float64))
+        contact.reference.fill_(3e-9)
+    contact.move_reference(20e-9)
+    assert contact.reference.item() == pytest.approx(20e-9, abs=1e-18)
+    torch.testing.assert_close(contact.offsets + contact.reference, torch.tensor([13e-9, -2e-9], dtype=torch.float64))
+
+
 def test_terms_report_non_physical_values():
     from ptwin.physics.terms import VOCABULARY
 

@@ -31,7 +31,7 @@ import torch
 
 from ptwin.diagnosis.words import times_better
 from ptwin.fitting.lm import FitError
-from ptwin.fitting.physics_fit import PhysicsFit, fit_physics
+from ptwin.fitting.physics_fit import PhysicsFit, fit_physics, held_as
 from ptwin.physics.samples import Samples
 
 STABLE = 0.5  # largest relative spread of a parameter across folds
@@ -71,7 +71,7 @@ def held_out_curves(
         held = seen[samples.curve[seen] == curve]
         rest = seen[samples.curve[seen] != curve]
         for key, fit in (("named", named), ("smaller", smaller)):
-            model = make_model(fit.terms, fit.params, fit.permeability)
+            model = held_as(make_model(fit.terms, fit.params, fit.permeability), fit)
             try:
                 refit = fit_physics(model, samples, rest, FOLD_ITERATIONS, reference_free=fit.reference_free)
             except FitError:

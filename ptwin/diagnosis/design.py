@@ -45,7 +45,7 @@ from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.noise import NoiseModel
 from ptwin.data.recordings import SEGMENTS, Meta, RecordingSet
 from ptwin.fitting.lm import FitError
-from ptwin.fitting.physics_fit import PhysicsFit, cheapest, fit_physics, term_starts
+from ptwin.fitting.physics_fit import PhysicsFit, cheapest, fit_physics, held_as, term_starts
 from ptwin.physics.samples import Samples
 from ptwin.synth.simulator import SIMULATED, CurveSimulation, Experiment, Hold, simulate_curve
 
@@ -299,7 +299,7 @@ class ExperimentDesign:
             starts = [fit.params] + [
                 {t: {**fit.params[t], **values[t]} for t in fit.terms} for values in term_starts(fit.terms)
             ]
-        models = (self.make_model(fit.terms, values, fit.permeability) for values in starts)
+        models = (held_as(self.make_model(fit.terms, values, fit.permeability), fit) for values in starts)
         try:
             model = cheapest(models, samples, index)
             return fit_physics(model, samples, index, REFIT, REFIT_TOLERANCE, fit.reference_free).chi_square

@@ -15,7 +15,8 @@ reference's shallowest nodes have the wrong origin, and the fit reads a term tha
 like √w too large (γ 17.5 for 10.1 on that set; 10.1 with the correction fitted). What
 pins it: the other curves' rate forces near contact and their pre-contact samples
 (``CurveKinematics.pins_contact``), which must stay at the baseline. Where those are too small
-to pin it, it is not fitted (``ptwin.fitting.physics_fit``); nor where it would move the
+to pin it, it is held, at the best of its estimate and places later within ``reach``
+(``ptwin.fitting.physics_fit.later_contacts``); so it is too where it would move the
 contact further than ``reach``, the reference's onset: the travel between its estimated
 contact and where its force leaves the baseline for good (``Baseline.onset``). Within that
 stretch the force is at the baseline's noise and a contact there is a matter of shape;
@@ -64,6 +65,13 @@ class ContactNuisance(nn.Module):
             for i, curve in enumerate(self.curve_ids):
                 self.offsets[i] = shifts[curve] - shifts[reference]
             self.reference.fill_(shifts[reference])
+
+    def move_reference(self, correction: float) -> None:
+        """The reference's correction set to ``correction`` [m], every other curve's contact left where it is
+        (theirs are relative to it): a start where the reference's contact is tried later than its estimate."""
+        with torch.no_grad():
+            self.offsets -= correction - self.reference
+            self.reference.fill_(correction)
 
     def values(self) -> dict[str, float]:
         """The corrections [m] by curve id (the reference's relative ones)."""

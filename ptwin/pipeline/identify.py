@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import torch
 
 from ptwin.fitting.lm import FitError
-from ptwin.fitting.physics_fit import PhysicsFit, fit_physics
+from ptwin.fitting.physics_fit import PhysicsFit, fit_physics, fit_with_starts
 from ptwin.fitting.pointwise import ApparentPermeability, apparent_permeability
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import SolidViscosity
@@ -41,7 +41,7 @@ def identify(
     iterations = optim.physics_fit.iterations
     progress("stage 1: global K (elastic + Darcy) and the pointwise apparent K(w)")
     try:
-        base = fit_physics(make_model(), samples, train, iterations)
+        base = fit_with_starts(make_model, (), samples, train, iterations)
     except FitError as error:
         raise UnsupportedSet(
             f"{prepared.recordings.path}: the base model cannot be fitted to these curves ({error}); check the "

@@ -33,7 +33,7 @@ import torch
 from ptwin.data.recordings import write_recordings
 from ptwin.diagnosis.words import bounded, number, permeability_words
 from ptwin.fitting.lm import FitError
-from ptwin.fitting.physics_fit import PhysicsFit, fit_physics, fit_with_starts
+from ptwin.fitting.physics_fit import PhysicsFit, fit_with_starts
 from ptwin.physics.model import total
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
@@ -157,7 +157,7 @@ def added_force(
 ) -> dict[str, np.ndarray]:
     """δF [N] of every curve (the reference too: the term acts on all), per sample in file order;
     ``base_fit``: the base model fitted to the set's training samples (fitted here when None)."""
-    fit = base_fit or fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+    fit = base_fit or fit_with_starts(prepared.make_model, (), prepared.samples, prepared.split.train)
     base = copy.deepcopy(fit.model)
     if base.contact is not None:
         with torch.no_grad():
@@ -269,7 +269,7 @@ def _as_recorded(settings: InjectRunSettings, output_dir: Path) -> tuple[RunResu
     and the base model fitted to their training samples (what every term is added on)."""
     as_recorded = run(settings, output_dir / "as-recorded", _quiet)
     prepared = prepare(settings, _quiet)
-    return as_recorded, prepared, fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
+    return as_recorded, prepared, fit_with_starts(prepared.make_model, (), prepared.samples, prepared.split.train)
 
 
 def _added(
