@@ -320,18 +320,7 @@ def fit_with_starts(
     kept (χ² 693): the contact's 518 units of χ² named the viscosity, which gains 6.6 with the correction held in
     both.
 
-    Where the correction is held, the base model moves it from its estimate to the best of ``later_contacts`` where
-    that gains beyond noise (``_moved_where_it_gains``). Every candidate starts where the base model holds it, and
-    so nests it; where the base model moved it, from the estimate too: a term the base model lacks moves its
-    correction (a drag left out, above), and held where that misfit put it, the term's own model read K 0.85–1.57%
-    off, beyond its interval, on three simulated sets whose estimates are right (0.28–0.34% from the estimate). A
-    term that grows as √w from contact may move it on to the best of those places on the base model's evidence
-    (starting from the base model's K and with the fluid force off). Within the reference's onset its contact is
-    a matter of shape, and a rate force that grows from contact makes a Hertz onset read early: on real agarose
-    with 5 Pa·s added, the reference's estimate moved 27.5 nm earlier than as recorded. The base model keeps it
-    there (χ² 5933; 5921 at the 36 nm onset, 3.6 under the noise model). Held there, the viscosity fitted γ 5.98
-    with the fluid force gone (χ² 5905); moved 24 nm, γ 4.54 at χ² 5837, 68 lower (21 under the noise model), 96
-    below the base model.
+    Where the correction is held, the base model and a term that grows as √w may move it (``later_contacts``).
 
     The fit kept is the physical one of least χ², where a start found one: a term's parameters end at their
     physical range, so a non-physical optimum is kept (to be rejected by ``Term.violation``) only where no
@@ -377,7 +366,21 @@ MOVE_FALSE_ALARM = 0.01
 def later_contacts(fit: PhysicsFit) -> tuple[float, ...]:
     """Where the reference's contact correction is tried beside where ``fit`` holds it [m]: ``LATER`` of its reach
     (``ContactNuisance.reach``); none where ``fit`` frees it or has none (known contacts). Later only: a rate force
-    grows from contact, which a Hertz onset reads as an earlier contact, never a later one."""
+    grows from contact, which a Hertz onset reads as an earlier contact, never a later one.
+
+    Where the correction is held, the base model moves it from its estimate to the best of these places where
+    that gains beyond noise (``_moved_where_it_gains``). Every candidate starts where the base model holds it, and
+    so nests it; where the base model moved it, from the estimate too: a term the base model lacks moves its
+    correction (a drag left out: ``_with_reference_contact``), and held where that misfit put it, the term's own
+    model read K 0.85–1.57% off, beyond its interval, on three simulated sets whose estimates are right
+    (0.28–0.34% from the estimate). A term that grows as √w from contact may move it on to the best of those
+    places on the base model's evidence (starting from the base model's K and with the fluid force off). Within
+    the reference's onset its contact is a matter of shape, and a rate force that grows from contact makes a
+    Hertz onset read early: on real agarose with 5 Pa·s added, the reference's estimate moved 27.5 nm earlier
+    than as recorded. The base model keeps it there (χ² 5933; 5921 at the 36 nm onset, 3.6 under the noise
+    model). Held there, the viscosity fitted γ 5.98 with the fluid force gone (χ² 5905); moved 24 nm, γ 4.54 at
+    χ² 5837, 68 lower (21 under the noise model), 96 below the base model.
+    """
     if fit.reference_free is not False or not math.isfinite(fit.model.contact.reach):
         return ()
     return tuple(fraction * fit.model.contact.reach for fraction in LATER)
