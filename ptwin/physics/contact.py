@@ -15,8 +15,8 @@ reference's shallowest nodes have the wrong origin, and the fit reads a term tha
 like √w too large (γ 17.5 for 10.1 on that set; 10.1 with the correction fitted). What
 pins it: the other curves' rate forces near contact and their pre-contact samples
 (``CurveKinematics.pins_contact``), which must stay at the baseline. Where those are too small
-to pin it, it is held, at the best of its estimate and places later within ``reach``
-(``ptwin.fitting.physics_fit.later_contacts``); so it is too where it would move the
+to pin it, it is held: at its estimate, or later within ``reach`` where χ² falls there beyond
+noise (``ptwin.fitting.physics_fit.later_contacts``); so it is too where it would move the
 contact further than ``reach``, the reference's onset: the travel between its estimated
 contact and where its force leaves the baseline for good (``Baseline.onset``). Within that
 stretch the force is at the baseline's noise and a contact there is a matter of shape;
