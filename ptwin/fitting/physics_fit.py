@@ -340,7 +340,7 @@ def fit_with_starts(
     follow = None if base is None else base.reference_free
     permeabilities = (None, base.permeability, *fluid_off) if hidden else (None, *fluid_off)
     # Held, the reference's correction starts where the base model's is (its own contacts, for a hidden term).
-    held = None if follow is not False or hidden else base.model.contact.reference.item()
+    held = None if hidden or base is None else _held_at(base)
 
     def at(permeability, correction=held):
         def model():
@@ -390,7 +390,12 @@ def held_as(model: ForceModel, fit: PhysicsFit) -> ForceModel:
     """``model`` with the reference's contact correction where ``fit`` holds it (``fit_with_starts``: not always
     at the estimate), every other curve's contact where it was; as it is where ``fit`` frees it or has none. A
     refit of ``fit``'s model that holds the correction as ``fit`` did (a fold, a design's refit) holds it there."""
-    return _moved(model, fit.model.contact.reference.item() if fit.reference_free is False else None)
+    return _moved(model, _held_at(fit))
+
+
+def _held_at(fit: PhysicsFit) -> float | None:
+    """Where ``fit`` holds the reference's contact correction [m]; None where it frees it or has none."""
+    return fit.model.contact.reference.item() if fit.reference_free is False else None
 
 
 def _moved(model: ForceModel, correction: float | None) -> ForceModel:
@@ -410,8 +415,10 @@ def _moved_where_it_gains(held: PhysicsFit, later: list, samples, index, iterati
         moved = _best(later, samples, index, iterations, False) if later else None
     except FitError:
         moved = None
-    if moved is None or moved.physical != held.physical:
-        return moved if moved is not None and moved.physical else held
+    if moved is None:
+        return held
+    if moved.physical != held.physical:
+        return moved if moved.physical else held
     gain = (held.chi_square - moved.chi_square) / held.inflation
     return moved if gain > scipy.stats.chi2.ppf(1.0 - MOVE_FALSE_ALARM, 1) else held
 
