@@ -1,11 +1,19 @@
-"""Hereditary terms: the parallel scan against a loop, the lags against closed forms."""
+"""Hereditary terms: the recurrence against a loop, its two solvers against each other, the lags against closed
+forms."""
 
 import math
 
 import pytest
 import torch
 
-from ptwin.physics.recurrence import first_order_lag, hereditary_inverse, linear_recurrence, relaxation_integral
+from ptwin.physics.recurrence import (
+    _parallel_scan,
+    _substituted,
+    first_order_lag,
+    hereditary_inverse,
+    linear_recurrence,
+    relaxation_integral,
+)
 
 
 def test_scan_equals_the_sequential_recurrence_and_restarts():
@@ -18,6 +26,19 @@ def test_scan_equals_the_sequential_recurrence_and_restarts():
         x = a[i] * x + b[i]
         expected[i] = x
     torch.testing.assert_close(linear_recurrence(a, b), expected, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_substitution_and_parallel_scan_agree_on_many_recurrences_laid_end_to_end(reverse):
+    """The CPU's solver lays the recurrences of the leading dimensions end to end in one LAPACK call; a coupling
+    left between one's end and the next one's start would carry x across (the GPU's scan never does)."""
+    generator = torch.Generator().manual_seed(2)
+    a = torch.rand(4, 3, 257, generator=generator, dtype=torch.float64) * 1.1  # a growing mode too
+    b = torch.randn(4, 3, 257, generator=generator, dtype=torch.float64) + 5.0
+    a[..., 100] = 0.0
+    torch.testing.assert_close(_substituted(a, b, reverse), _parallel_scan(a, b, reverse), rtol=1e-12, atol=1e-10)
+    # each recurrence alone gives what it gives beside the others
+    torch.testing.assert_close(_substituted(a[2, 1], b[2, 1], reverse), _substituted(a, b, reverse)[2, 1])
 
 
 @pytest.mark.parametrize("samples", [50, 500])

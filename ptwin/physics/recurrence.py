@@ -1,14 +1,15 @@
-"""Hereditary terms as first-order linear recurrences, evaluated by a parallel scan.
+"""Hereditary terms as first-order linear recurrences, x_i = a_i x_{i−1} + b_i over all samples at once.
 
-x_i = a_i x_{i−1} + b_i over all samples at once: log₂(S) vectorised steps instead of
-a Python loop per sample, so the Jacobians of relaxation terms stay cheap. The scan is one
-autograd node whose derivatives are scans too (``_LinearRecurrence``): autograd through its
-log₂(S) slices allocated and summed a full-size gradient for every slice, 60% of a power-law
-fit's Jacobian on the bench map's spots.
+The recurrence is one autograd node whose derivatives are recurrences too (``_LinearRecurrence``):
+autograd through a scan's log₂(S) slices allocated and summed a full-size gradient for every slice,
+60% of a power-law fit's Jacobian on the bench map's spots. On the CPU it is solved by LAPACK's banded
+triangular substitution (``_substituted``), O(S) work a recurrence in compiled code; elsewhere (a GPU) by a
+parallel scan (``_parallel_scan``), log₂(S) vectorised steps of O(S) work each.
 """
 
 from __future__ import annotations
 
+import scipy.linalg
 import torch
 
 BLOCK_WORK = 1000  # block × modes of ``hereditary_inverse``: one exponential's law in a block or two
@@ -22,8 +23,36 @@ def linear_recurrence(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 
 def _scan(a: torch.Tensor, b: torch.Tensor, reverse: bool) -> torch.Tensor:
-    """The recurrence's values by a parallel (Hillis–Steele) scan, forwards or, ``reverse``, from the last
-    sample back (x_i = a_i x_{i+1} + b_i); in place on copies, outside autograd."""
+    """The recurrence's values, forwards or, ``reverse``, from the last sample back (x_i = a_i x_{i+1} + b_i);
+    outside autograd."""
+    if a.device.type == "cpu" and a.numel():
+        return _substituted(a, b, reverse)
+    return _parallel_scan(a, b, reverse)
+
+
+def _substituted(a: torch.Tensor, b: torch.Tensor, reverse: bool) -> torch.Tensor:
+    """``_scan`` by substitution: the recurrence is the unit bidiagonal system x_i − a_i x_{i−1} = b_i, lower
+    (upper, ``reverse``). The recurrences of the leading dimensions are laid end to end with no coupling between
+    one's last sample and the next one's first, so one LAPACK call (``tbtrs``) solves them all, each as
+    x_i = b_i + a_i x_{i−1} in turn. 2 ms for the 43 modes × 8000 samples of a power law on the demo,
+    against the parallel scan's 15 ms."""
+    band = torch.empty(*a.shape, 2, dtype=a.dtype)  # LAPACK's band storage, column-major; the unit diagonal unread
+    if reverse:  # row 0: A[j−1, j] = −a_{j−1}
+        torch.neg(a[..., :-1], out=band[..., 1:, 0])
+        band[..., 0, 0] = 0.0
+    else:  # row 1: A[j+1, j] = −a_{j+1}
+        torch.neg(a[..., 1:], out=band[..., :-1, 1])
+        band[..., -1, 1] = 0.0
+    storage = band.reshape(-1, 2).numpy().T
+    solve = scipy.linalg.get_lapack_funcs("tbtrs", (storage,))
+    x, info = solve(storage, b.detach().reshape(-1, 1).numpy(), uplo="U" if reverse else "L", diag="U")
+    if info != 0:
+        raise ValueError(f"LAPACK's tbtrs refused the recurrence (info {info})")
+    return torch.from_numpy(x).reshape(b.shape)
+
+
+def _parallel_scan(a: torch.Tensor, b: torch.Tensor, reverse: bool) -> torch.Tensor:
+    """``_scan`` by a parallel (Hillis–Steele) scan, in place on copies."""
     a, b = a.clone(), b.clone()
     n, shift = a.shape[-1], 1
     while shift < n:
@@ -40,8 +69,6 @@ class _LinearRecurrence(torch.autograd.Function):
     """x = R(a, b), forwards or ``reverse``. Its derivatives are recurrences again: the adjoint runs the other
     way, g_i = ḡ_i + a_{i+1} g_{i+1}, with ∂/∂b = g and ∂/∂a_i = g_i x_{i−1}; the tangent is R(a, ȧ·x_{i−1} +
     ḃ). Both call this node, so gradients of gradients (``ptwin.fitting.lm.Traced``) and forward AD work."""
-
-    generate_vmap_rule = True
 
     @staticmethod
     def forward(a, b, reverse):
@@ -67,6 +94,14 @@ class _LinearRecurrence(torch.autograd.Function):
         if a_tangent is not None:
             tangent = tangent + a_tangent * _shifted(x, ctx.reverse)
         return _LinearRecurrence.apply(a, tangent, ctx.reverse)
+
+    @staticmethod
+    def vmap(info, in_dims, a, b, reverse):
+        # Leading dimensions are independent recurrences already: a batch is one more (torch.func's jacfwd
+        # batches the tangents). A generated rule would run the forward on batched tensors LAPACK cannot read.
+        a, b = (x.expand(info.batch_size, *x.shape) if d is None else x.movedim(d, 0) for x, d in zip((a, b), in_dims))
+        a, b = torch.broadcast_tensors(a, b)
+        return _LinearRecurrence.apply(a, b, reverse), 0
 
 
 def _shifted(x: torch.Tensor, later: bool) -> torch.Tensor:
