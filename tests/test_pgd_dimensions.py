@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from ptwin.pgd.config import PlaneMesh
+from ptwin.pgd.dimensions import _banded
 from ptwin.pgd.enrichment import _pencil
 from ptwin.pgd.fem import triangle_matrices
 from ptwin.pgd.problem import build_problem
@@ -62,3 +63,8 @@ def test_pencil_drops_the_null_space_of_dependent_modes():
     assert torch.allclose(w.T @ (b0 + b1) @ w, torch.eye(4, dtype=torch.float64), atol=1e-10)
     assert torch.allclose(w.T @ b1 @ w, torch.diag(lam), atol=1e-10)
     assert ((lam >= 0) & (lam <= 1)).all()
+
+
+def test_a_singular_tridiagonal_system_is_refused_in_words():
+    with pytest.raises(np.linalg.LinAlgError, match="singular"):
+        _banded(np.zeros((3, 4)), np.ones(4))
