@@ -116,7 +116,8 @@ def _banded(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     gtsv, which ``scipy.linalg.solve_banded`` calls for one band either side, without that wrapper's checks and
     conversions: the bands and loads are the mesh's, finite by construction, and the wrapper took three quarters
     of the solves' time in a basis build. The same call, so the same basis to the bit."""
-    *_, x, info = _TRIDIAGONAL(matrix[2, :-1], matrix[1], matrix[0, 1:], rhs, 1, 1, 1, 0)
+    lower, diagonal, upper = matrix[2, :-1], matrix[1], matrix[0, 1:]
+    *_, x, info = _TRIDIAGONAL(lower, diagonal, upper, rhs, overwrite_dl=1, overwrite_d=1, overwrite_du=1)
     if info != 0:
         raise np.linalg.LinAlgError(f"a tridiagonal system of the basis is singular (LAPACK gtsv info {info})")
     return x
