@@ -21,7 +21,7 @@ from hydra import compose, initialize_config_dir
 from bench.discover_bench import ESTIMATED, ROOT, SOFT
 from ptwin.app import register, typed
 from ptwin.data.recordings import write_recordings
-from ptwin.fitting.physics_fit import MOVE_FALSE_ALARM, fit_with_starts
+from ptwin.fitting.physics_fit import MOVE_FALSE_ALARM, fit_with_starts, held_at
 from ptwin.pipeline.prepare import prepare
 from ptwin.synth.simulator import Experiment, simulate
 
@@ -41,9 +41,8 @@ def moved(setting: dict, seed: int, folder: Path, overrides: list[str]) -> bool 
         settings = typed(compose(config_name="train", overrides=[f"data.path={folder}", *overrides]))
     p = prepare(settings, progress=lambda line: None)
     fit = fit_with_starts(p.make_model, (), p.samples, p.split.train, settings.optim.physics_fit.iterations)
-    if fit.reference_free is not False:
-        return None
-    return fit.model.contact.reference.item() != 0.0
+    held = held_at(fit)
+    return None if held is None else held != 0.0
 
 
 def main() -> None:

@@ -340,7 +340,7 @@ def fit_with_starts(
     follow = None if base is None else base.reference_free
     permeabilities = (None, base.permeability, *fluid_off) if hidden else (None, *fluid_off)
     # Held, the reference's correction starts where the base model's is (its own contacts, for a hidden term).
-    held = None if hidden or base is None else _held_at(base)
+    held = None if hidden or base is None else held_at(base)
 
     def at(permeability, correction=held):
         def model():
@@ -390,10 +390,10 @@ def held_as(model: ForceModel, fit: PhysicsFit) -> ForceModel:
     """``model`` with the reference's contact correction where ``fit`` holds it (``fit_with_starts``: not always
     at the estimate), every other curve's contact where it was; as it is where ``fit`` frees it or has none. A
     refit of ``fit``'s model that holds the correction as ``fit`` did (a fold, a design's refit) holds it there."""
-    return _moved(model, _held_at(fit))
+    return _moved(model, held_at(fit))
 
 
-def _held_at(fit: PhysicsFit) -> float | None:
+def held_at(fit: PhysicsFit) -> float | None:
     """Where ``fit`` holds the reference's contact correction [m]; None where it frees it or has none."""
     return fit.model.contact.reference.item() if fit.reference_free is False else None
 
