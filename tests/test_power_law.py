@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 import torch
 
+from ptwin.physics.hereditary import hereditary_inverse
 from ptwin.physics.power_law import T0, kernel_for, kernel_modes, ting_integral
-from ptwin.physics.recurrence import hereditary_inverse, relaxation_integral
+from ptwin.physics.recurrence import relaxation_integral
 from ptwin.physics.terms import PowerLawRheology
 
 ALPHAS = [0.0, 0.01, 0.1, 0.3, 0.49]

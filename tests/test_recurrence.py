@@ -10,7 +10,6 @@ from ptwin.physics.recurrence import (
     _parallel_scan,
     _substituted,
     first_order_lag,
-    hereditary_inverse,
     linear_recurrence,
     relaxation_integral,
 )
@@ -69,24 +68,6 @@ def test_lag_gradient_in_the_time_constant():
         return first_order_lag(forcing, log_tau.exp().expand(40), time, start)
 
     assert torch.autograd.gradcheck(lag, (torch.tensor(math.log(0.2), dtype=torch.float64, requires_grad=True),))
-
-
-@pytest.mark.parametrize("modes", [1, 3, 40])
-def test_hereditary_inverse_inverts_the_relaxation_whatever_the_block(modes):
-    """F + extra·(F − F₀) + Σ w_m q_m(F) = target, solved block by block: the blocks are a matter of cost (the
-    default takes one block for one mode's 200 samples), never of the answer."""
-    generator = torch.Generator().manual_seed(modes)
-    time = torch.cumsum(torch.rand(200, generator=generator, dtype=torch.float64) * 0.02, 0)
-    start = torch.arange(200) == 0
-    force = (time - time[0]) ** 1.5 + 1e-3 * torch.randn(200, generator=generator, dtype=torch.float64)
-    times = torch.logspace(-2, 1, modes, dtype=torch.float64)
-    weights = torch.rand(modes, generator=generator, dtype=torch.float64)
-    extra = torch.tensor(0.2, dtype=torch.float64)
-    memory = sum(w * relaxation_integral(force, t.expand(200), time, start) for w, t in zip(weights, times))
-    target = force + extra * (force - force[0]) + memory
-    for block in (None, 7, 200):
-        recovered = hereditary_inverse(target, extra, weights, times, time, block)
-        torch.testing.assert_close(recovered, force, rtol=1e-10, atol=1e-12)
 
 
 def test_scan_derivatives_first_second_and_forward():

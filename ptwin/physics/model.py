@@ -11,7 +11,7 @@ from torch import nn
 from ptwin.physics.contact import ContactNuisance
 from ptwin.physics.elastic import ReferenceCurve
 from ptwin.physics.fluid_force import FluidForce, FluidInputError
-from ptwin.physics.recurrence import hereditary_inverse
+from ptwin.physics.hereditary import hereditary_inverse
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 

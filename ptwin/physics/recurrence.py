@@ -12,8 +12,6 @@ from __future__ import annotations
 import scipy.linalg
 import torch
 
-BLOCK_WORK = 1000  # block × modes of ``hereditary_inverse``: one exponential's law in a block or two
-
 
 def linear_recurrence(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """x with x_i = a_i x_{i−1} + b_i and x_{−1} = 0 along the last dimension (set a_i = 0 to restart
@@ -84,7 +82,7 @@ class _LinearRecurrence(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad):
         a, x = ctx.saved_tensors
-        adjoint = _LinearRecurrence.apply(_shifted(a, not ctx.reverse), grad, not ctx.reverse)
+        adjoint = _adjoint(a, grad, ctx.reverse)
         return (adjoint * _shifted(x, ctx.reverse) if ctx.needs_input_grad[0] else None), adjoint, None
 
     @staticmethod
@@ -104,6 +102,17 @@ class _LinearRecurrence(torch.autograd.Function):
         return _LinearRecurrence.apply(a, b, reverse), 0
 
 
+def recurrence_pullback(a: torch.Tensor, x: torch.Tensor, cotangent: torch.Tensor):
+    """(ā, b̄) with ⟨cotangent, dx⟩ = ⟨ā, da⟩ + ⟨b̄, db⟩ for x = ``linear_recurrence``(a, b); differentiable again."""
+    adjoint = _adjoint(a, cotangent, False)
+    return adjoint * _shifted(x, False), adjoint
+
+
+def _adjoint(a: torch.Tensor, cotangent: torch.Tensor, reverse: bool) -> torch.Tensor:
+    """g_i = ḡ_i + a_{i+1} g_{i+1}, the cotangent pulled back through the recurrence (the other way, ``reverse``)."""
+    return _LinearRecurrence.apply(_shifted(a, not reverse), cotangent, not reverse)
+
+
 def _shifted(x: torch.Tensor, later: bool) -> torch.Tensor:
     """x_{i−1} at i (``later``: x_{i+1}), zero past the end."""
     zero = torch.zeros_like(x[..., :1])
@@ -117,10 +126,10 @@ def decays(time: torch.Tensor, start: torch.Tensor, relaxation_time: torch.Tenso
     positive = relaxation_time > 0
     safe_tau = relaxation_time.where(positive, torch.ones_like(relaxation_time))
     a = torch.exp(-step / safe_tau).where(positive & ~start, torch.zeros_like(time))
-    return a, _step_mean(step / safe_tau).where(positive, torch.zeros_like(time))
+    return a, step_mean(step / safe_tau).where(positive, torch.zeros_like(time))
 
 
-def _step_mean(ratio: torch.Tensor) -> torch.Tensor:
+def step_mean(ratio: torch.Tensor) -> torch.Tensor:
     """(1 − exp(−x))/x, the mean of exp(−s/τ) over a step of x = Δt/τ, and 1 at x = 0."""
     moving = ratio > 0
     safe = ratio.where(moving, torch.ones_like(ratio))
@@ -155,40 +164,3 @@ def relaxation_integral(
     a, weight = decays(time, start, relaxation_time) if decayed is None else decayed
     increment = torch.diff(signal, prepend=signal[:1])
     return linear_recurrence(a, (increment * weight).where(~start, torch.zeros_like(signal)))
-
-
-def hereditary_inverse(
-    target: torch.Tensor,
-    extra: torch.Tensor,
-    weights: torch.Tensor,
-    times: torch.Tensor,
-    time: torch.Tensor,
-    block: int | None = None,
-) -> torch.Tensor:
-    """F on one curve's samples with F + extra·(F − F₀) + Σ_m weights_m·q_m = target, q_m the relaxation
-    integral of F with τ_m = ``times`` (M,) (exact for F linear between samples, as ``relaxation_integral``).
-
-    The operator is causal with a positive diagonal, so it is solved exactly by block forward substitution:
-    ``block`` samples at a time (default: ``BLOCK_WORK`` / modes, at least 25), a dense lower-triangular
-    system in the increments of F, the modes carried from block to block — where a fixed point
-    F ← target − Σ(…) diverges once the memory outweighs F (g > 1, or a power law's weight on the last step)."""
-    if block is None:  # a block's work grows as block² × modes and the loop's cost as samples / block
-        block = max(BLOCK_WORK // max(times.numel(), 1), 25)
-    first = target[0]
-    values, modes = [first[None]], torch.zeros_like(times)
-    for begin in range(1, time.numel(), block):
-        end = min(begin + block, time.numel())
-        since = time[begin:end, None] - time[None, begin - 1 : end]  # (B, B + 1): t_i − t_k, k from begin − 1
-        decay = torch.exp(-since.clamp(min=0)[..., None] / times)  # (B, B + 1, M)
-        mean = _step_mean(torch.diff(time[begin - 1 : end])[:, None] / times)  # (B, M): each step's mean
-        lower = torch.ones(end - begin, end - begin, dtype=torch.bool, device=time.device).tril()
-        # The parameters (weights, extra) enter by matmuls and single sums, not as elementwise products
-        # with constants: fewer ops in every Jacobian's graph.
-        system = ((decay[:, 1:] * mean) @ weights + (1 + extra)).where(lower, torch.zeros_like(since[:, 1:]))
-        carried = decay[:, 0] @ (weights * modes)
-        previous = values[-1][-1]
-        rhs = target[begin:end] - carried - previous + extra * (first - previous)
-        increments = torch.linalg.solve_triangular(system, rhs[:, None], upper=False)[:, 0]
-        values.append(previous + torch.cumsum(increments, 0))
-        modes = torch.diag(decay[-1, 0]) @ modes + (decay[-1, 1:] * mean).T @ increments
-    return torch.cat(values)

@@ -1,0 +1,131 @@
+"""The elastic law under hereditary terms: F with A·F = target, A causal (``hereditary_inverse``), solved exactly.
+
+The solve is block substitution, outside autograd (``_Substitution``). Its derivatives are the other solve's:
+d(A⁻¹b) = A⁻¹(db − dA·A⁻¹b), so a cotangent ḡ pulls back to λ = A⁻ᵀḡ on ``target`` and to −⟨λ, dA·F⟩ on the
+parameters, the operator's own derivative in closed form, O(samples × modes) (``_operator_slopes``). LM's
+Jacobians differentiate that gradient again (``ptwin.fitting.lm.Traced``): λ is one more node of the same kind,
+so a Jacobian walks a few substitutions and a small graph, not the graph of every block's solve three times."""
+
+from __future__ import annotations
+
+import torch
+
+from ptwin.physics.recurrence import decays, linear_recurrence, recurrence_pullback, step_mean
+
+BLOCK_WORK = 1000  # block × modes of the substitution: one exponential's law in a block or two
+
+
+def hereditary_inverse(
+    target: torch.Tensor,
+    extra: torch.Tensor,
+    weights: torch.Tensor,
+    times: torch.Tensor,
+    time: torch.Tensor,
+    block: int | None = None,
+) -> torch.Tensor:
+    """F on one curve's samples [N] with A·F = F + extra·(F − F₀) + Σ_m weights_m·q_m = target, q_m the relaxation
+    integral of F with τ_m = ``times`` (M,) [s] from the first sample (``relaxation_integral``).
+
+    The operator is causal with a positive diagonal, so it is solved exactly by block forward substitution:
+    ``block`` samples at a time (default: ``BLOCK_WORK`` / modes, at least 25), a dense lower-triangular
+    system in the increments of F, the modes carried from block to block — where a fixed point
+    F ← target − Σ(…) diverges once the memory outweighs F (g > 1, or a power law's weight on the last step).
+    Differentiable in ``target``, ``extra``, ``weights`` and ``times``, to any order."""
+    if block is None:  # a block's work grows as block² × modes and the loop's cost as samples / block
+        block = max(BLOCK_WORK // max(times.numel(), 1), 25)
+    blocks = _Substitution(extra.detach(), weights.detach(), times.detach(), time, block)
+    return _HereditarySolve.apply(target, extra, weights, times, time, blocks, False)
+
+
+class _Substitution:
+    """A's blocks for given parameters, kept for every solve a Jacobian asks of them (one forward, one adjoint,
+    one forward a column).
+
+    Written in the increments ΔF_k = F_k − F_{k−1}, A·F = F₀ + T·ΔF on each sample after the first, T lower
+    triangular with T[i, k] = 1 + extra + Σ_m w_m exp(−(t_i − t_k)/τ_m) mean_{k,m}, mean_{k,m} the mean of
+    exp(−s/τ_m) over step k. Each block holds its diagonal piece of T and the decays that carry the modes
+    across its edges."""
+
+    def __init__(self, extra: torch.Tensor, weights: torch.Tensor, times: torch.Tensor, time: torch.Tensor, block):
+        self.extra, self.weights, self.blocks = extra, weights, []
+        for begin in range(1, time.numel(), block):
+            end = min(begin + block, time.numel())
+            since = time[begin:end, None] - time[None, begin - 1 : end]  # (B, B + 1): t_i − t_k, k from begin − 1
+            decay = torch.exp(-since.clamp(min=0)[..., None] / times)  # (B, B + 1, M)
+            kernel = decay[:, 1:] * step_mean(torch.diff(time[begin - 1 : end])[:, None] / times)
+            system = (kernel @ weights + (1 + extra)).tril()
+            # from the sample before the block to each of its samples, across the block, and from each to its last
+            self.blocks.append((begin, end, decay[:, 0], decay[-1, 0], kernel[-1], system))
+
+    def solve(self, target: torch.Tensor) -> torch.Tensor:
+        """F = A⁻¹·target, the blocks in turn; the modes Σ_k exp(−(t − t_k)/τ_m) mean_{k,m} ΔF_k carried."""
+        first = target[0]
+        values, modes = [first[None]], torch.zeros_like(self.weights)
+        for begin, end, entering, across, leaving, system in self.blocks:
+            previous = values[-1][-1]
+            carried = entering @ (self.weights * modes)
+            rhs = target[begin:end] - carried - previous + self.extra * (first - previous)
+            increments = torch.linalg.solve_triangular(system, rhs[:, None], upper=False)[:, 0]
+            values.append(previous + torch.cumsum(increments, 0))
+            modes = across * modes + leaving.T @ increments
+        return torch.cat(values)
+
+    def solve_transposed(self, cotangent: torch.Tensor) -> torch.Tensor:
+        """λ = A⁻ᵀ·cotangent: Tᵀλ_{≥1} = the cotangent's sums from each sample on, the blocks from the last, the
+        later samples' pull carried back as modes Σ_i λ_i exp(−(t_i − t)/τ_m); λ₀ what the first sample keeps."""
+        suffix = cotangent.flip(0).cumsum(0).flip(0)
+        pieces, tail, modes = [], cotangent.new_zeros(()), torch.zeros_like(self.weights)
+        for begin, end, entering, across, leaving, system in reversed(self.blocks):
+            later = (1 + self.extra) * tail + leaving @ (self.weights * modes)
+            dual = torch.linalg.solve_triangular(system.mT, (suffix[begin:end] - later)[:, None], upper=True)[:, 0]
+            pieces.append(dual)
+            tail = tail + dual.sum()
+            modes = across * modes + entering.T @ dual
+        return torch.cat([(cotangent.sum() - tail)[None], *reversed(pieces)])
+
+
+class _HereditarySolve(torch.autograd.Function):
+    """x = A⁻¹b, or A⁻ᵀb (``transposed``), by the blocks of ``_Substitution``. ⟨ḡ, dx⟩ = ⟨λ, db⟩ − ⟨λ, dA·x⟩
+    with λ = A⁻ᵀḡ (transposed: ⟨λ, db⟩ − ⟨x, dA·λ⟩, λ = A⁻¹ḡ); λ is this node again, the other way, so a
+    gradient's gradient is as exact as the gradient."""
+
+    @staticmethod
+    def forward(b, extra, weights, times, time, blocks, transposed):
+        return blocks.solve_transposed(b) if transposed else blocks.solve(b)
+
+    @staticmethod
+    def setup_context(ctx, inputs, output):
+        _, extra, weights, times, time, blocks, transposed = inputs
+        ctx.save_for_backward(extra, weights, times, time, output)
+        ctx.blocks, ctx.transposed = blocks, transposed
+
+    @staticmethod
+    def backward(ctx, grad):
+        extra, weights, times, time, solution = ctx.saved_tensors
+        dual = _HereditarySolve.apply(grad, extra, weights, times, time, ctx.blocks, not ctx.transposed)
+        if not any(ctx.needs_input_grad[1:4]):
+            return dual, None, None, None, None, None, None
+        left, right = (solution, dual) if ctx.transposed else (dual, solution)
+        found = (-g for g in _operator_slopes(left, right, weights, times, time))
+        return dual, *(g if need else None for g, need in zip(found, ctx.needs_input_grad[1:4])), None, None, None
+
+
+def _operator_slopes(left, right, weights, times, time):
+    """∂⟨left, A·right⟩/∂(extra, weights, times), left and right held, in closed form.
+
+    Plain torch ops and the recurrence's node, so the result differentiates again in all five; an autograd call
+    here would also run on through the nodes that made ``left`` and ``right`` (this one among them)."""
+    start = torch.arange(time.numel(), device=time.device) == 0
+    tau = times[:, None]
+    decay, mean = decays(time, start, tau)  # (M, N): a = exp(−Δt/τ) and the step's mean of exp(−s/τ)
+    increment = torch.diff(right, prepend=right[:1])
+    memory = linear_recurrence(decay, increment * mean)  # q_m of right
+    to_decay, to_forcing = recurrence_pullback(decay, memory, left.expand_as(memory))
+    positive = tau > 0
+    safe_tau = tau.where(positive, torch.ones_like(tau))
+    ratio = torch.diff(time, prepend=time[:1]) / safe_tau  # Δt/τ
+    # ∂a/∂τ = a·Δt/τ² (a = 0 at a start and where τ = 0); ∂mean/∂τ = (mean − exp(−Δt/τ))/τ, 0 over a flat step
+    decay_slope = decay * ratio / safe_tau
+    mean_slope = (mean - torch.exp(-ratio)).where(positive, torch.zeros_like(mean)) / safe_tau
+    times_slope = weights * (to_decay * decay_slope + to_forcing * increment * mean_slope).sum(-1)
+    return torch.dot(left, right - right[0]), memory @ left, times_slope
