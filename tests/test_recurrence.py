@@ -85,3 +85,25 @@ def test_scan_derivatives_first_second_and_forward():
     torch.testing.assert_close(
         jacobian, torch.autograd.functional.jacobian(lambda b: linear_recurrence(a.detach(), b), b.detach())
     )
+
+
+def test_the_node_skips_the_signature_binding_outside_torch_func(monkeypatch):
+    """``Function.apply`` binds its arguments by ``inspect.signature`` on every call, a tenth of a fit's Jacobian;
+    the recurrence's node goes to the C++ node at once, with the same value and derivatives."""
+    import inspect
+
+    from ptwin.physics.recurrence import _LinearRecurrence
+
+    generator = torch.Generator().manual_seed(4)
+    a, b = (torch.rand(2, 30, generator=generator, dtype=torch.float64, requires_grad=True) for _ in range(2))
+    bound = torch.autograd.Function.apply.__func__(_LinearRecurrence, a, b, False)
+    expected = torch.autograd.grad(bound.square().sum(), (a, b))
+
+    def refuse(*_, **__):
+        raise AssertionError("a signature was bound")
+
+    monkeypatch.setattr(inspect, "signature", refuse)
+    x = linear_recurrence(a, b)
+    assert torch.equal(x, bound)
+    for found, wanted in zip(torch.autograd.grad(x.square().sum(), (a, b)), expected):
+        assert torch.equal(found, wanted)

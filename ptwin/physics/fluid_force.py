@@ -21,9 +21,10 @@ from torch import nn
 
 from ptwin.pgd.basis import Basis
 from ptwin.physics.log_grid import LogGridFunctions
+from ptwin.physics.node import Node
 
 
-class _SeparableLaw(torch.autograd.Function):
+class _SeparableLaw(Node):
     """F = A·U·R³/K·c(x) [N] (A: μ and the laws' constants) as one autograd node, its derivatives in closed form.
 
     Scaled coordinates leave U, K and R exact power laws (U¹, K⁻¹, R³) and one shape

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import torch
 
+from ptwin.physics.node import Node
 from ptwin.physics.recurrence import decays, linear_recurrence, recurrence_pullback, step_mean
 
 BLOCK_WORK = 1000  # block × modes of the substitution: one exponential's law in a block or two
@@ -84,7 +85,7 @@ class _Substitution:
         return torch.cat([(cotangent.sum() - tail)[None], *reversed(pieces)])
 
 
-class _HereditarySolve(torch.autograd.Function):
+class _HereditarySolve(Node):
     """x = A⁻¹b, or A⁻ᵀb (``transposed``), by the blocks of ``_Substitution``. ⟨ḡ, dx⟩ = ⟨λ, db⟩ − ⟨λ, dA·x⟩
     with λ = A⁻ᵀḡ (transposed: ⟨λ, db⟩ − ⟨x, dA·λ⟩, λ = A⁻¹ḡ); λ is this node again, the other way, so a
     gradient's gradient is as exact as the gradient."""

@@ -12,6 +12,8 @@ from __future__ import annotations
 import scipy.linalg
 import torch
 
+from ptwin.physics.node import Node
+
 
 def linear_recurrence(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """x with x_i = a_i x_{i−1} + b_i and x_{−1} = 0 along the last dimension (set a_i = 0 to restart
@@ -63,7 +65,7 @@ def _parallel_scan(a: torch.Tensor, b: torch.Tensor, reverse: bool) -> torch.Ten
     return b
 
 
-class _LinearRecurrence(torch.autograd.Function):
+class _LinearRecurrence(Node):
     """x = R(a, b), forwards or ``reverse``. Its derivatives are recurrences again: the adjoint runs the other
     way, g_i = ḡ_i + a_{i+1} g_{i+1}, with ∂/∂b = g and ∂/∂a_i = g_i x_{i−1}; the tangent is R(a, ȧ·x_{i−1} +
     ḃ). Both call this node, so gradients of gradients (``ptwin.fitting.lm.Traced``) and forward AD work."""
