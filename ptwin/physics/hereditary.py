@@ -47,7 +47,7 @@ class _Substitution:
     exp(−s/τ_m) over step k. Each block holds its diagonal piece of T and the decays that carry the modes
     across its edges."""
 
-    def __init__(self, extra: torch.Tensor, weights: torch.Tensor, times: torch.Tensor, time: torch.Tensor, block):
+    def __init__(self, extra: torch.Tensor, weights: torch.Tensor, times: torch.Tensor, time: torch.Tensor, block: int):
         self.extra, self.weights, self.blocks = extra, weights, []
         for begin in range(1, time.numel(), block):
             end = min(begin + block, time.numel())
@@ -111,7 +111,9 @@ class _HereditarySolve(Node):
         return dual, *(g if need else None for g, need in zip(found, ctx.needs_input_grad[1:4])), None, None, None
 
 
-def _operator_slopes(left, right, weights, times, time):
+def _operator_slopes(
+    left: torch.Tensor, right: torch.Tensor, weights: torch.Tensor, times: torch.Tensor, time: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """∂⟨left, A·right⟩/∂(extra, weights, times), left and right held, in closed form.
 
     Plain torch ops and the recurrence's node, so the result differentiates again in all five; an autograd call
