@@ -11,7 +11,7 @@ from __future__ import annotations
 import torch
 
 from ptwin.physics.node import Node
-from ptwin.physics.recurrence import decays, linear_recurrence, recurrence_pullback, step_mean
+from ptwin.physics.recurrence import decay_slopes, decays, recurrence_pullback, relaxation_integral, step_mean
 
 BLOCK_WORK = 1000  # block × modes of the substitution: one exponential's law in a block or two
 
@@ -120,15 +120,10 @@ def _operator_slopes(
     here would also run on through the nodes that made ``left`` and ``right`` (this one among them)."""
     start = torch.arange(time.numel(), device=time.device) == 0
     tau = times[:, None]
-    decay, mean = decays(time, start, tau)  # (M, N): a = exp(−Δt/τ) and the step's mean of exp(−s/τ)
-    increment = torch.diff(right, prepend=right[:1])
-    memory = linear_recurrence(decay, increment * mean)  # q_m of right
-    to_decay, to_forcing = recurrence_pullback(decay, memory, left.expand_as(memory))
-    positive = tau > 0
-    safe_tau = tau.where(positive, torch.ones_like(tau))
-    ratio = torch.diff(time, prepend=time[:1]) / safe_tau  # Δt/τ
-    # ∂a/∂τ = a·Δt/τ² (a = 0 at a start and where τ = 0); ∂mean/∂τ = (mean − exp(−Δt/τ))/τ, 0 over a flat step
-    decay_slope = decay * ratio / safe_tau
-    mean_slope = (mean - torch.exp(-ratio)).where(positive, torch.zeros_like(mean)) / safe_tau
+    decayed = decays(time, start, tau)  # (M, N): a = exp(−Δt/τ) and the step's mean of exp(−s/τ)
+    memory = relaxation_integral(right, tau, time, start, decayed)  # q_m of right
+    to_decay, to_forcing = recurrence_pullback(decayed[0], memory, left.expand_as(memory))
+    decay_slope, mean_slope = decay_slopes(time, start, tau, decayed)
+    increment = torch.diff(right, prepend=right[:1])  # the forcing is increment × mean (0 at the start)
     times_slope = weights * (to_decay * decay_slope + to_forcing * increment * mean_slope).sum(-1)
     return torch.dot(left, right - right[0]), memory @ left, times_slope

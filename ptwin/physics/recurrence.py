@@ -84,8 +84,7 @@ class _LinearRecurrence(Node):
     @staticmethod
     def backward(ctx, grad):
         a, x = ctx.saved_tensors
-        adjoint = _adjoint(a, grad, ctx.reverse)
-        return (adjoint * _shifted(x, ctx.reverse) if ctx.needs_input_grad[0] else None), adjoint, None
+        return *_pullback(a, x, grad, ctx.reverse, ctx.needs_input_grad[0]), None
 
     @staticmethod
     def jvp(ctx, a_tangent, b_tangent, _):
@@ -106,13 +105,14 @@ class _LinearRecurrence(Node):
 
 def recurrence_pullback(a: torch.Tensor, x: torch.Tensor, cotangent: torch.Tensor):
     """(ā, b̄) with ⟨cotangent, dx⟩ = ⟨ā, da⟩ + ⟨b̄, db⟩ for x = ``linear_recurrence``(a, b); differentiable again."""
-    adjoint = _adjoint(a, cotangent, False)
-    return adjoint * _shifted(x, False), adjoint
+    return _pullback(a, x, cotangent, False, True)
 
 
-def _adjoint(a: torch.Tensor, cotangent: torch.Tensor, reverse: bool) -> torch.Tensor:
-    """g_i = ḡ_i + a_{i+1} g_{i+1}, the cotangent pulled back through the recurrence (the other way, ``reverse``)."""
-    return _LinearRecurrence.apply(_shifted(a, not reverse), cotangent, not reverse)
+def _pullback(a: torch.Tensor, x: torch.Tensor, cotangent: torch.Tensor, reverse: bool, to_a: bool):
+    """``recurrence_pullback`` of the recurrence run either way (ā only where ``to_a``): the adjoint g_i = ḡ_i +
+    a_{i+1} g_{i+1} runs the other way, b̄ = g and ā_i = g_i x_{i−1}."""
+    adjoint = _LinearRecurrence.apply(_shifted(a, not reverse), cotangent, not reverse)
+    return (adjoint * _shifted(x, reverse) if to_a else None), adjoint
 
 
 def _shifted(x: torch.Tensor, later: bool) -> torch.Tensor:
@@ -124,11 +124,27 @@ def _shifted(x: torch.Tensor, later: bool) -> torch.Tensor:
 def decays(time: torch.Tensor, start: torch.Tensor, relaxation_time: torch.Tensor):
     """(a, τ(1 − a)/Δt) per sample for a = exp(−Δt/τ); a = 0 where τ = 0 or a curve starts; the mean
     τ(1 − a)/Δt → 1 over a step of zero length (repeated times)."""
-    step = torch.diff(time, prepend=time[:1]).where(~start, torch.ones_like(time))
-    positive = relaxation_time > 0
-    safe_tau = relaxation_time.where(positive, torch.ones_like(relaxation_time))
+    step, positive, safe_tau = _steps(time, start, relaxation_time)
     a = torch.exp(-step / safe_tau).where(positive & ~start, torch.zeros_like(time))
     return a, step_mean(step / safe_tau).where(positive, torch.zeros_like(time))
+
+
+def decay_slopes(
+    time: torch.Tensor, start: torch.Tensor, relaxation_time: torch.Tensor, decayed: tuple[torch.Tensor, torch.Tensor]
+):
+    """∂/∂τ of ``decays``' (a, mean) [1/s], ``decayed`` their values: a·Δt/τ² and (mean − exp(−Δt/τ))/τ, 0 where
+    τ = 0 (a's also at a curve's start, the mean's over a step of zero length)."""
+    a, mean = decayed
+    step, positive, safe_tau = _steps(time, start, relaxation_time)
+    ratio = step / safe_tau
+    return a * ratio / safe_tau, (mean - torch.exp(-ratio)).where(positive, torch.zeros_like(mean)) / safe_tau
+
+
+def _steps(time: torch.Tensor, start: torch.Tensor, relaxation_time: torch.Tensor):
+    """(Δt per sample, 1 at a curve's start; τ > 0; τ, 1 where it is not)."""
+    step = torch.diff(time, prepend=time[:1]).where(~start, torch.ones_like(time))
+    positive = relaxation_time > 0
+    return step, positive, relaxation_time.where(positive, torch.ones_like(relaxation_time))
 
 
 def step_mean(ratio: torch.Tensor) -> torch.Tensor:
