@@ -155,6 +155,35 @@ def test_choose_takes_the_lowest_physical_bic_then_prunes_what_does_not_pay_twic
     assert choose(candidates, 10.0, HeldOutTest(white, np.zeros(1000, dtype=bool), 0.01))[0] == ()
 
 
+def test_the_term_whose_removal_costs_least_is_pruned_first_whatever_the_vocabulary_order():
+    import numpy as np
+
+    from ptwin.diagnosis.name import HeldOutTest, choose
+    from ptwin.diagnosis.null import ScaledF, StructureTest
+
+    # Real PAAm with 5 Pa·s added chose viscosity + relaxation; the viscosity, first in the vocabulary, cost 16.7
+    # BIC to remove but fell short on the validation samples and went first, and the relaxation, which cost 5.5,
+    # then fell alone. Here a is first and fails beside b on held-out samples; b costs 6.8 BIC: b goes first, and
+    # a alone beats the base model by both measures.
+    rng = np.random.default_rng(11)
+    noise, shape = rng.standard_normal(1000), np.sqrt(np.linspace(0.0, 1.0, 1000))
+    white = StructureTest(ScaledF(1.0, 1.0, math.inf), {}, 0.01, 0.0, rng.standard_normal((1000, 200)))
+    held_out = HeldOutTest(white, np.arange(1000) % 5 == 0, 0.01)
+    candidates = {
+        c.terms: c
+        for c in (
+            candidate((), 2000.0, 2.0, residual=noise + shape),
+            candidate(("a",), 1100.0, 1.0, residual=noise),
+            candidate(("b",), 1900.0, 1.9, residual=noise + 0.95 * shape),
+            candidate(("a", "b"), 1085.0, 1.9, residual=noise + 0.95 * shape),  # train noise, taken on b's share
+        )
+    }
+    assert candidates[("a",)].fit.bic - candidates[("a", "b")].fit.bic == pytest.approx(6.8, abs=0.1)
+    chosen, notes = choose(candidates, 10.0, held_out)
+    assert chosen == ("a",)
+    assert len(notes) == 1 and notes[0].startswith("b pruned from a + b: removing it costs 6.8 BIC")
+
+
 def test_a_term_that_only_keeps_another_physical_is_weighed_with_it_against_the_model_without_both():
     import numpy as np
 

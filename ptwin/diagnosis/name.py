@@ -322,13 +322,15 @@ def _gain(test, validation, smaller, larger, parameters: int, label: str, false_
 def choose(candidates: dict, bic_margin: float, held_out: HeldOutTest) -> tuple[tuple[str, ...], list[str]]:
     """The accepted subset and the reasons for every term pruned on the way. Each term is weighed against
     ``weighed_against``'s subset: where the chosen set without it is not usable, a term that only keeps another
-    physical (or acting) is pruned with that other unless the two together pay."""
+    physical (or acting) is pruned with that other unless the two together pay. Of the terms that fail, the one
+    whose removal costs the least BIC goes first (backward elimination): pruned in the vocabulary's order, a
+    viscosity that cost 16.7 BIC to remove and fell short on the validation samples went before the relaxation
+    beside it, which cost 5.5, and the relaxation then fell alone (real PAAm with 5 Pa·s added)."""
     usable = {t: c for t, c in candidates.items() if c.usable}
     chosen = min(usable, key=lambda t: usable[t].fit.bic)
     notes = []
-    pruned = True
-    while pruned and chosen:
-        pruned = False
+    while chosen:
+        failing = []
         for term in chosen:
             without = weighed_against(usable, chosen, term)
             if without not in usable:  # not even the base model is usable: nothing to weigh it against
@@ -336,14 +338,17 @@ def choose(candidates: dict, bic_margin: float, held_out: HeldOutTest) -> tuple[
             bic_cost = usable[without].fit.bic - usable[chosen].fit.bic
             gain = held_out.evidence(usable[without], usable[chosen], term)
             if bic_cost < bic_margin or not gain.beyond:
-                # from which subset: the notes also say what each term does alone
-                source = f" from {' + '.join(chosen)}" if len(chosen) > 1 else ""
-                notes.append(
-                    f"{term} pruned{source}{together_with(chosen, without, term)}: removing it costs {bic_cost:.1f} "
-                    f"BIC (needs ≥ {bic_margin:g}), and on the validation samples {gain.words()}"
-                )
-                chosen, pruned = without, True
-                break
+                failing.append((bic_cost, term, without, gain))
+        if not failing:
+            break
+        bic_cost, term, without, gain = min(failing, key=lambda f: f[0])
+        # from which subset: the notes also say what each term does alone
+        source = f" from {' + '.join(chosen)}" if len(chosen) > 1 else ""
+        notes.append(
+            f"{term} pruned{source}{together_with(chosen, without, term)}: removing it costs {bic_cost:.1f} "
+            f"BIC (needs ≥ {bic_margin:g}), and on the validation samples {gain.words()}"
+        )
+        chosen = without
     return chosen, notes
 
 
