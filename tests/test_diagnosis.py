@@ -175,7 +175,7 @@ def test_the_term_whose_removal_costs_least_is_pruned_first_whatever_the_vocabul
             candidate((), 2000.0, 2.0, residual=noise + shape),
             candidate(("a",), 1100.0, 1.0, residual=noise),
             candidate(("b",), 1900.0, 1.9, residual=noise + 0.95 * shape),
-            candidate(("a", "b"), 1085.0, 1.9, residual=noise + 0.95 * shape),  # train noise, taken on b's share
+            candidate(("a", "b"), 1085.0, 1.9, residual=noise + 0.95 * shape),  # held out, no better than b
         )
     }
     assert candidates[("a",)].fit.bic - candidates[("a", "b")].fit.bic == pytest.approx(6.8, abs=0.1)

@@ -1,9 +1,9 @@
 """Name the physics: fit base + every candidate subset jointly with K, then choose.
 
-Selection: among the *physical* fits take the lowest BIC, then prune any term whose
-removal costs less than ``bic_margin`` BIC, or less validation χ² than noise and a model
-error of ``MODEL_ERROR`` noise std would give it one time in ``1/false_alarm``
-(``HeldOutTest``), the least costly first. BIC alone admits spurious terms (a model error of a tenth of the noise
+Selection: among the *physical* fits take the lowest BIC, then prune, the least costly first,
+any term whose removal costs less than ``bic_margin`` BIC, or less validation χ² than noise
+and a model error of ``MODEL_ERROR`` noise std would give it one time in ``1/false_alarm``
+(``HeldOutTest``). BIC alone admits spurious terms (a model error of a tenth of the noise
 earns any margin over thousands of samples) and held-out error alone cannot split some
 pairs, so a term must pass both. Every subset of k terms is fitted when the best of k − 1
 leaves structure (greedy forward selection would miss pairs whose members barely help alone;
