@@ -114,16 +114,26 @@ def candidate(terms, chi_square, val_rmse, violations=None, whiteness=1.0, resid
     return Candidate(terms, fit, val_rmse, whiteness, residual=residual)
 
 
+def every_fifth_validates(seed: int):
+    """(rng, noise, a √ shape, the structure test of white noise, the held-out test where every fifth of 1000
+    samples validates), drawn from ``seed`` in that order."""
+    import numpy as np
+
+    from ptwin.diagnosis.name import HeldOutTest
+    from ptwin.diagnosis.null import ScaledF, StructureTest
+
+    rng = np.random.default_rng(seed)
+    noise, shape = rng.standard_normal(1000), np.sqrt(np.linspace(0.0, 1.0, 1000))
+    white = StructureTest(ScaledF(1.0, 1.0, math.inf), {}, 0.01, 0.0, rng.standard_normal((1000, 200)))
+    return rng, noise, shape, white, HeldOutTest(white, np.arange(1000) % 5 == 0, 0.01)
+
+
 def test_choose_takes_the_lowest_physical_bic_then_prunes_what_does_not_pay_twice():
     import numpy as np
 
     from ptwin.diagnosis.name import HeldOutTest, choose, confounded, rejected
-    from ptwin.diagnosis.null import ScaledF, StructureTest
 
-    rng = np.random.default_rng(5)
-    noise, shape = rng.standard_normal(1000), np.sqrt(np.linspace(0.0, 1.0, 1000))
-    white = StructureTest(ScaledF(1.0, 1.0, math.inf), {}, 0.01, 0.0, rng.standard_normal((1000, 200)))
-    held_out = HeldOutTest(white, np.arange(1000) % 5 == 0, 0.01)  # every fifth sample validates
+    rng, noise, shape, white, held_out = every_fifth_validates(5)
     candidates = {
         c.terms: c
         for c in (
@@ -156,19 +166,13 @@ def test_choose_takes_the_lowest_physical_bic_then_prunes_what_does_not_pay_twic
 
 
 def test_the_term_whose_removal_costs_least_is_pruned_first_whatever_the_vocabulary_order():
-    import numpy as np
-
-    from ptwin.diagnosis.name import HeldOutTest, choose
-    from ptwin.diagnosis.null import ScaledF, StructureTest
+    from ptwin.diagnosis.name import choose
 
     # Real PAAm with 5 Pa·s added chose viscosity + relaxation; the viscosity, first in the vocabulary, cost 16.7
     # BIC to remove but fell short on the validation samples and went first, and the relaxation, which cost 5.5,
     # then fell alone. Here a is first and fails beside b on held-out samples; b costs 6.8 BIC: b goes first, and
     # a alone beats the base model by both measures.
-    rng = np.random.default_rng(11)
-    noise, shape = rng.standard_normal(1000), np.sqrt(np.linspace(0.0, 1.0, 1000))
-    white = StructureTest(ScaledF(1.0, 1.0, math.inf), {}, 0.01, 0.0, rng.standard_normal((1000, 200)))
-    held_out = HeldOutTest(white, np.arange(1000) % 5 == 0, 0.01)
+    _, noise, shape, _, held_out = every_fifth_validates(11)
     candidates = {
         c.terms: c
         for c in (
@@ -185,18 +189,12 @@ def test_the_term_whose_removal_costs_least_is_pruned_first_whatever_the_vocabul
 
 
 def test_a_term_that_only_keeps_another_physical_is_weighed_with_it_against_the_model_without_both():
-    import numpy as np
-
-    from ptwin.diagnosis.name import HeldOutTest, choose, weighed_against
-    from ptwin.diagnosis.null import ScaledF, StructureTest
+    from ptwin.diagnosis.name import choose, weighed_against
 
     # Real agarose with 5 Pa s added: pore_pressure_relaxation alone implied an elastic law that falls with depth,
     # power_law_rheology beside it kept it physical, and weighed against that unphysical fit it could never be
     # pruned. Here b keeps a physical and the pair beats the base model by 4.5 BIC only: nothing is named.
-    rng = np.random.default_rng(7)
-    noise, shape = rng.standard_normal(1000), np.sqrt(np.linspace(0.0, 1.0, 1000))
-    white = StructureTest(ScaledF(1.0, 1.0, math.inf), {}, 0.01, 0.0, rng.standard_normal((1000, 200)))
-    held_out = HeldOutTest(white, np.arange(1000) % 5 == 0, 0.01)
+    _, noise, shape, _, held_out = every_fifth_validates(7)
     candidates = {
         c.terms: c
         for c in (
