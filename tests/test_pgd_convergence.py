@@ -66,3 +66,20 @@ def test_a_basis_is_the_same_whatever_the_thread_count_it_is_built_on():
     assert bases[0].stats["modes_per_mesh"] == bases[1].stats["modes_per_mesh"]
     assert all(torch.equal(a, b) for a, b in zip(bases[0].force.functions, bases[1].force.functions))
     assert torch.get_num_threads() == threads  # the build gave the caller's threads back
+
+
+def test_the_richardson_mesh_solved_in_a_second_process_gives_the_basis_of_one_process(monkeypatch):
+    # Where a second core is free, build_basis solves the coarse Richardson mesh in a forked process beside the
+    # fine one; the basis must be the one a single process builds, to the bit (a cached basis names no machine).
+    import torch
+
+    from ptwin.pgd import build
+
+    config = small_config(richardson=True)
+    beside = build.build_basis(config, progress=lambda line: None)
+    monkeypatch.setattr(build, "_may_fork", lambda: False)
+    alone = build.build_basis(config, progress=lambda line: None)
+    assert beside.stats["modes_per_mesh"] == alone.stats["modes_per_mesh"]
+    assert len(alone.stats["modes_per_mesh"]) == 2
+    assert all(torch.equal(a, b) for a, b in zip(beside.force.functions, alone.force.functions))
+    assert torch.equal(beside.force.core, alone.force.core)

@@ -101,15 +101,25 @@ def enrich(
     )
 
 
-def _others(n_dims: int) -> list[torch.Tensor]:
+def _others(n_dims: int) -> list[list[int]]:
     """For each dimension d, the indices of every other dimension."""
-    return [torch.tensor([e for e in range(n_dims) if e != d]) for d in range(n_dims)]
+    return [[e for e in range(n_dims) if e != d] for d in range(n_dims)]
+
+
+def _product(values: list[torch.Tensor], dimensions, axis: int) -> torch.Tensor:
+    """The elementwise product of ``values[d]`` over ``dimensions``, stacked along ``axis`` and reduced there."""
+    return torch.stack([values[e] for e in dimensions], dim=axis).prod(dim=axis)
 
 
 def _new_mode(dims, n_terms, applied, amplitudes, settings, generator):
     """Alternating-directions fixed point for the next rank-one correction.
 
     ``applied[d]`` (n·T, N_d) holds A_t^d F_i^d for the n known modes, mode-major.
+
+    The projections are kept one tensor per dimension and stacked where a product over the other dimensions
+    needs them: the same values in the same layout as columns of one tensor, so the same products to the bit,
+    without a write into a column and a gather of columns per dimension and iteration (a fifth of a basis build,
+    whose every op is small).
     """
     n_dims = len(dims)
     others = _others(n_dims)
@@ -117,31 +127,32 @@ def _new_mode(dims, n_terms, applied, amplitudes, settings, generator):
     for dim in dims:
         start = dim.load + 0.5 * dim.load.abs().max() * torch.rand(dim.size, generator=generator, dtype=torch.float64)
         new.append(start / start.norm())
-    own = torch.empty(n_terms, n_dims, dtype=torch.float64)  # F_d^T A_t^d F_d
-    loads = torch.empty(n_dims, dtype=torch.float64)  # F_d^T f^d
-    prior = torch.empty(n_terms, n_dims, amplitudes.numel(), dtype=torch.float64)  # F_d^T A_t^d F_i^d
+    own = [None] * n_dims  # F_d^T A_t^d F_d (T,)
+    loads = [None] * n_dims  # F_d^T f^d ()
+    prior = [None] * n_dims  # F_d^T A_t^d F_i^d (T, n)
 
     def project(d):
-        own[:, d] = dims[d].apply(new[d][:, None])[:, :, 0] @ new[d]
-        prior[:, d] = (applied[d] @ new[d]).reshape(-1, n_terms).T
+        own[d] = dims[d].apply(new[d][:, None])[:, :, 0] @ new[d]
+        prior[d] = (applied[d] @ new[d]).reshape(-1, n_terms).T
         loads[d] = new[d] @ dims[d].load
 
     for d in range(n_dims):
         project(d)
     for iteration in range(1, settings.max_fixed_point_iterations + 1):  # noqa: B007 (returned)
-        previous = [f.clone() for f in new]
+        previous = list(new)  # each factor is replaced, never written into
         for d in range(n_dims):
-            coefficients = own[:, others[d]].prod(dim=1)
-            weights = amplitudes * prior[:, others[d]].prod(dim=1)  # (T, n)
-            rhs = loads[others[d]].prod() * dims[d].load - weights.T.reshape(-1) @ applied[d]
+            coefficients = _product(own, others[d], 1)
+            weights = amplitudes * _product(prior, others[d], 1)  # (T, n)
+            rhs = _product(loads, others[d], 0) * dims[d].load - weights.T.reshape(-1) @ applied[d]
             solution = dims[d].solve(coefficients, rhs)
-            new[d] = solution / solution.norm()
+            new[d] = solution / torch.linalg.vector_norm(solution)
             project(d)
         overlap = torch.stack([f @ g for f, g in zip(new, previous)]).prod().abs()
         if 1.0 - overlap < settings.fixed_point_tol:
             break
-    stiffness = own.prod(dim=1).sum()
-    amplitude = (loads.prod() - (amplitudes * prior.prod(dim=1)).sum()) / stiffness
+    every = range(n_dims)
+    stiffness = _product(own, every, 1).sum()
+    amplitude = (_product(loads, every, 0) - (amplitudes * _product(prior, every, 1)).sum()) / stiffness
     return new, amplitude, iteration
 
 
@@ -161,8 +172,8 @@ def _update_dimensions(dims, factors, applied, amplitudes):
     grams = [f.T @ a for f, a in zip(factors, applied)]  # (T, n, n) each
     loads = [f.T @ dim.load for f, dim in zip(factors, dims)]
     for d, dim in enumerate(dims):
-        b = torch.stack([grams[e] for e in others[d].tolist()]).prod(dim=0)
-        h = torch.stack([loads[e] for e in others[d].tolist()]).prod(dim=0)
+        b = _product(grams, others[d], 0)
+        h = _product(loads, others[d], 0)
         lam, w = _pencil(b[1], b[0] + b[1])
         y = (dim.solve_each(torch.stack([1 - lam, lam], dim=1)) * (w.T @ h)[None, :]) @ w.T
         amplitudes = y.norm(dim=0)
