@@ -1,5 +1,6 @@
 """ForceModel against the forward simulator: two routes to the same recording, term by term."""
 
+import dataclasses
 import math
 
 import pytest
@@ -69,6 +70,20 @@ def test_one_pass_over_samples_and_nodes_equals_the_elastic_law_first(tmp_path, 
     assert list(one_pass) == list(two_passes) == ["elastic", "fluid", "solid_viscosity", "power_law_rheology"]
     for name, force in two_passes.items():
         torch.testing.assert_close(one_pass[name], force, rtol=1e-12, atol=1e-21)
+
+
+def test_samples_written_into_after_an_evaluation_are_evaluated_as_they_now_are(tmp_path, coarse_cache):
+    # The reference keeps the samples joined with its depth nodes for the samples last seen (a fit evaluates the
+    # same ones at every step); samples written into in place are other samples, and must not get the old ones' force.
+    basis_path = next(coarse_cache.glob("*.pt"))
+    folder = simulated_set(tmp_path, base_speeds=(0.5e-6, 40e-6), samples=300, noise_std=0.0)
+    model, samples = model_for(folder, basis_path, ("solid_viscosity",), {"solid_viscosity": {"gamma": 5.0}})
+    with torch.no_grad():
+        model(samples)
+        samples.velocity.mul_(2.0)
+        samples.depth.add_(5e-8)
+        fresh = dataclasses.replace(samples, depth=samples.depth.clone(), velocity=samples.velocity.clone())
+        assert torch.equal(model(samples), model(fresh))
 
 
 def test_moving_the_reference_correction_leaves_every_other_curves_contact_where_it_was():

@@ -98,7 +98,8 @@ def scaled_residual(model, samples: Samples, index: torch.Tensor):
     force, noise = samples.force[index], samples.noise_floor[index]
 
     def residual(theta):
-        predicted = functional_call(model, vector.as_dict(theta), (samples,))
+        # No parameter of a ForceModel is tied to another: functional_call need not map ties at every evaluation.
+        predicted = functional_call(model, vector.as_dict(theta), (samples,), tie_weights=False)
         return (predicted[index] - force) / noise
 
     return vector, residual

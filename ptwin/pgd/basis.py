@@ -7,6 +7,7 @@ built-in types loaded with ``weights_only=True``); any other format version is r
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import torch
@@ -32,8 +33,9 @@ class Basis:
     field: dict[str, torch.Tensor]
     stats: dict
 
-    @property
+    @cached_property
     def config_hash(self) -> str:
+        """Its config's hash, once: every model a fit builds records it (a basis is read-only once built)."""
         return self.config.hash()
 
     @classmethod

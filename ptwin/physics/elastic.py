@@ -3,6 +3,7 @@ reference curve that ptwin's self-consistent elastic law is read off."""
 
 from __future__ import annotations
 
+from dataclasses import fields
 from functools import partial
 
 import numpy as np
@@ -70,6 +71,7 @@ class ReferenceCurve(nn.Module):
         self.curve = reference.curve
         self.noise_std = reference.noise.std  # [N]: what the law inherits of the reference's noise
         self.samples = depth.size  # the reference's samples the law is read off
+        self._after = None  # ``after``'s last (key, value)
         tail = grid[-max(2, int(self.TAIL * nodes)) :] ** 1.5
         self.register_buffer("tail_slope", as_tensor((tail - tail.mean()) / np.sum((tail - tail.mean()) ** 2)))
 
@@ -106,6 +108,20 @@ class ReferenceCurve(nn.Module):
             noise_floor=torch.zeros_like(time),
             curve_ids=(f"{self.curve}'s depth nodes",),  # what an error names: nodes, not the curve's samples
         )
+
+    def after(self, samples: Samples) -> tuple[Samples, Samples]:
+        """(``samples`` followed by the depth nodes' ``node_samples``, the node samples): what a self-consistent
+        model evaluates its rate forces on in one pass. Kept for the samples last given while neither they nor the
+        nodes change (the same tensors, none written into): a fit evaluates the same samples at every step, and
+        joining them anew cost 0.2 ms each time (3% of a bench-map spot)."""
+        parts = (*(getattr(samples, f.name) for f in fields(samples)), *self.buffers())
+        key = [(part, part._version if torch.is_tensor(part) else None) for part in parts]
+        kept = self._after
+        same = kept is not None and len(kept[0]) == len(key)
+        if not (same and all(a is b and u == v for (a, u), (b, v) in zip(kept[0], key))):
+            nodes = self.node_samples()
+            kept = self._after = (key, (samples.join(nodes), nodes))
+        return kept[1]
 
     def bracket(self, depth: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(index of the node below, fraction of the way to the next) for each depth."""

@@ -191,8 +191,8 @@ class ForceModel(nn.Module):
             return {"elastic": elastic, **self.rate_forces(samples, elastic, permeability)}
         # The rate forces of the samples and of the reference's depth nodes (for the elastic law) in one
         # pass: half the ops, and under autograd (a Jacobian in every fit step) ops cost more than their arithmetic.
-        nodes = self.reference.node_samples()
-        both, count = self._direct_forces(samples.join(nodes)), len(samples)
+        joined, nodes = self.reference.after(samples)
+        both, count = self._direct_forces(joined), len(samples)
         law = self._elastic_law(nodes, {name: force[count:] for name, force in both.items()})
         elastic = self.reference.interpolate(law, self.depth(samples))
         direct = {name: force[:count] for name, force in both.items()}
