@@ -49,17 +49,19 @@ def _one_thread():
 
 def _build(config: PGDConfig, progress: Callable[[str], None]) -> Basis:
     _restart_peak_memory()
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     levels = [config.plane.rings] + ([config.plane.rings // 2] if config.richardson else [])
     weights = [1.0] if not config.richardson else _richardson_weights(config.richardson_order)
-    peaks = []
-    with _beside(_coarse_force, config, levels[1]) if len(levels) > 1 else nullcontext() as coarse:
+    here = (lambda: _coarse_force(config, levels[1])) if len(levels) > 1 else None
+    beside = here is not None and _may_fork()
+    elsewhere = {"peak": 0, "cpu": 0.0}  # what the coarse mesh's own process used, where it had one
+    with _forked(_coarse_force, config, levels[1]) if beside else nullcontext(here) as coarse:
         problem, solution = _solved(config, levels[0], progress)
         forces = [force_modes(solution, problem.dims)]
         if coarse is not None:
-            beta, factors, peak = coarse()
+            beta, factors, peak, seconds = coarse()
             forces.append((beta, factors))
-            peaks.append(peak)
+            elsewhere = {"peak": peak, "cpu": seconds} if beside else elsewhere
             progress(f"the Richardson mesh ({levels[1]} rings): {beta.numel()} modes")
     betas = [weight * beta for weight, (beta, _) in zip(weights, forces)]
     names = [dim.name for dim in problem.dims.parameters]
@@ -68,7 +70,9 @@ def _build(config: PGDConfig, progress: Callable[[str], None]) -> Basis:
     stats = {
         "modes_per_mesh": [beta.numel() for beta in betas],
         "seconds": time.perf_counter() - start,
-        "peak_rss_bytes": max([_peak_memory(), *peaks]),
+        "core_seconds": time.process_time() - cpu + elsewhere["cpu"],
+        "meshes_side_by_side": beside,
+        "peak_rss_bytes": max(_peak_memory(), elsewhere["peak"]),
         "force_ranks": [f.shape[1] for f in force.functions],
     }
     return Basis.from_build(config, problem, solution, force, stats)
@@ -86,28 +90,26 @@ def _solved(config: PGDConfig, rings: int, progress: Callable[[str], None]):
 
 def _coarse_force(config: PGDConfig, rings: int):
     """(β, parameter factors) of ``force_modes`` on the Richardson mesh of ``rings`` rings, solved as
-    ``build_basis`` solves it (one thread), and the peak memory [B] of the process that solved it."""
+    ``build_basis`` solves it (one thread); the peak memory [B] and the CPU seconds of the process that solved it."""
     with _one_thread():
         problem, solution = _solved(config, rings, lambda line: None)
-        return *force_modes(solution, problem.dims), _peak_memory()
+        return *force_modes(solution, problem.dims), _peak_memory(), time.process_time()
 
 
 @contextmanager
-def _beside(function: Callable, *args):
+def _forked(function: Callable, *args):
     """``function(*args)`` started in a forked process while the block runs: the value is the call that waits for
     its result. The two meshes of a Richardson build are independent problems, each solved on one thread: on a
-    second core the build takes the fine mesh's time, to the same bits (pgd=default 2.1–2.7 s against 3.6–4.8 s
-    one after the other here). With one core, without ``fork``, or in a daemonic process (a Dask worker, which
-    may have no children) the call runs in this process when waited for."""
-    if not _may_fork():
-        yield lambda: function(*args)
-        return
+    second core the build takes the fine mesh's time, to the same bits (pgd=default 1.8–2.1 s against 3.6–4.8 s
+    one after the other here). ``_may_fork`` says where a build does this."""
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
         future = pool.submit(function, *args)
         yield future.result
 
 
 def _may_fork() -> bool:
+    """Whether a second core is free for the coarse mesh and this process may fork: not with one core, nor where
+    ``fork`` is not there, nor in a daemonic process (a Dask worker building the basis may have no children)."""
     return (
         "fork" in multiprocessing.get_all_start_methods()
         and sys.platform.startswith("linux")
