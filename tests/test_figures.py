@@ -37,3 +37,23 @@ def test_a_tight_figure_is_drawn_once_when_saved_and_looks_as_tight_layout_leave
     after, drawn_after = _saved(once)
     assert (drawn_before, drawn_after) == (2, 1)
     assert after == before
+
+
+def test_log_axes_read_as_matplotlibs_own_in_unicode_and_label_minor_ticks_only_between_decades():
+    # Matplotlib writes log-axis labels as mathtext, which a figure then parses; ours are the same labels in Unicode.
+    # Minor ticks are labelled only where no decade is in view: beside one, their labels ran into one another.
+    from ptwin.reporting.figures import _logarithmic
+
+    def labels(low, high):
+        figure, ax = plt.subplots(figsize=(4, 3))
+        ax.plot([low, high], [1.0, 2.0], "o")
+        _logarithmic(ax, "x")
+        figure.canvas.draw()
+        major = [label.get_text() for label in ax.get_xticklabels()]
+        minor = [label.get_text() for label in ax.get_xticklabels(minor=True) if label.get_text()]
+        plt.close(figure)
+        return major, minor
+
+    assert labels(1.2e-16, 3e-16) == (["10⁻¹⁶", "10⁻¹⁵"], ["2×10⁻¹⁶", "3×10⁻¹⁶", "4×10⁻¹⁶", "6×10⁻¹⁶"])
+    assert labels(2.0, 80.0) == (["10⁰", "10¹", "10²"], [])
+    assert labels(1e-3, 1e2) == (["10⁻⁴", "10⁻³", "10⁻²", "10⁻¹", "10⁰", "10¹", "10²", "10³"], [])

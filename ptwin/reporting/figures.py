@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import matplotlib
@@ -26,6 +27,33 @@ def tight(figure) -> None:
     three runs)."""
     figure.tight_layout()
     figure.set_layout_engine(None)
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+class _Decades(matplotlib.ticker.LogFormatterSciNotation):
+    """matplotlib's log-axis labels (10⁻¹⁶, 2×10⁻¹⁶) in Unicode, not mathtext: a mathtext label is parsed, the first
+    of a process after ~0.2 s building its grammar, and four of the demo's figures have a log axis (0.75 s against
+    0.49 s for four such figures in a fresh process). A label of another form stays as matplotlib writes it."""
+
+    def __call__(self, x, pos=None):
+        label = super().__call__(x, pos)
+        found = re.fullmatch(r"\$\\mathdefault\{(?:(.+)\\times)?(\d+)\^\{(-?\d+)\}\}\$", label)
+        if found is None:
+            return label
+        factor, base, power = found.groups()
+        return f"{factor + '×' if factor else ''}{base}{power.translate(_SUPERSCRIPT)}"
+
+
+def _logarithmic(ax, which: str) -> None:
+    """A log scale on the ``which`` ("x" or "y") axis of ``ax``, labelled by ``_Decades``: minor ticks only where no
+    decade is in view (matplotlib's own labelled them beside a single decade too, and 2×10⁰ to 6×10⁰ ran into one
+    another under the speeds of two curves)."""
+    getattr(ax, f"set_{which}scale")("log")
+    axis = getattr(ax, f"{which}axis")
+    axis.set_major_formatter(_Decades())
+    axis.set_minor_formatter(_Decades(labelOnlyBase=False, minor_thresholds=(0, 0.4)))
 
 
 def _curves(samples, index):
@@ -157,7 +185,7 @@ def _holds(samples, series: dict):
         ax.plot(since, samples.force[mine].numpy() * NANO, ".", ms=1.5, color="grey", alpha=0.5, label="measured")
         for (label, values), style in zip(series.items(), ("-", "--")):
             ax.plot(since, values[mine].numpy() * NANO, style, lw=1.2, label=label)
-        ax.set_xscale("log")
+        _logarithmic(ax, "x")
         ax.set_xlabel(f"time since the {kind.split()[0]} began [s]")
         ax.set_title(f"{curve}: {kind}", fontsize=9)
     axes[0][0].set_ylabel("force [nN]")
@@ -186,7 +214,8 @@ def _apparent_against_depth(samples, index, apparent):
     figure, ax = plt.subplots(figsize=(7, 4.5))
     permeability = apparent.permeability.cpu()
     for curve, _, mine in _curves(samples, index):
-        ax.semilogy(samples.depth[mine].numpy() * MICRO, permeability[mine].numpy(), ".", ms=1.5, label=curve)
+        ax.plot(samples.depth[mine].numpy() * MICRO, permeability[mine].numpy(), ".", ms=1.5, label=curve)
+    _logarithmic(ax, "y")
     ax.set_xlabel("depth w [µm]")
     ax.set_ylabel("apparent K [m²]")
     ax.set_title("Pointwise apparent permeability (Newton per sample)")
@@ -218,7 +247,7 @@ def _permeability_against_speed(apparent, base, corrected_per_curve):
             label="K per speed, corrected model",
         )
     ax.axhline(base.permeability, color="grey", ls="--", lw=1, label="global K, base model")
-    ax.set_xscale("log")
+    _logarithmic(ax, "x")
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("base speed [µm/s]")
     ax.set_ylabel("K [m²]")
@@ -249,7 +278,7 @@ def _viscous_per_speed(apparent, fits, term):
     ax2.plot(speeds * MICRO, [f.permeability for f in fits], "o")
     ax2.set_ylabel("K [m²]")
     for ax in (ax1, ax2):
-        ax.set_xscale("log")
+        _logarithmic(ax, "x")
         ax.set_xlabel("base speed [µm/s]")
     figure.suptitle(f"(K, {parameter}) per speed, Gauss–Newton with {term}")
     tight(figure)
