@@ -53,16 +53,14 @@ def _build(config: PGDConfig, progress: Callable[[str], None]) -> Basis:
     start, cpu = time.perf_counter(), time.process_time()
     levels = [config.plane.rings] + ([config.plane.rings // 2] if config.richardson else [])
     weights = [1.0] if not config.richardson else _richardson_weights(config.richardson_order)
-    here = (lambda: _coarse_force(config, levels[1])) if len(levels) > 1 else None
-    beside = here is not None and _may_fork()
-    elsewhere = {"peak": 0, "cpu": 0.0}  # what the coarse mesh's own process used, where it had one
-    with _forked(_coarse_force, config, levels[1]) if beside else nullcontext(here) as coarse:
+    beside = len(levels) > 1 and _may_fork()
+    peak, cpu_beside = 0, 0.0  # the coarse mesh's own process's, where it had one
+    with _forked(_coarse_force, config, levels[1]) if beside else nullcontext() as forked:
         problem, solution = _solved(config, levels[0], progress)
         forces = [force_modes(solution, problem.dims)]
-        if coarse is not None:
-            beta, factors, peak, seconds = coarse()
+        if len(levels) > 1:
+            (beta, factors), peak, cpu_beside = forked() if beside else (_coarse_force(config, levels[1]), 0, 0.0)
             forces.append((beta, factors))
-            elsewhere = {"peak": peak, "cpu": seconds} if beside else elsewhere
             progress(f"the Richardson mesh ({levels[1]} rings): {beta.numel()} modes")
     betas = [weight * beta for weight, (beta, _) in zip(weights, forces)]
     names = [dim.name for dim in problem.dims.parameters]
@@ -71,9 +69,9 @@ def _build(config: PGDConfig, progress: Callable[[str], None]) -> Basis:
     stats = {
         "modes_per_mesh": [beta.numel() for beta in betas],
         "seconds": time.perf_counter() - start,
-        "core_seconds": time.process_time() - cpu + elsewhere["cpu"],
+        "core_seconds": time.process_time() - cpu + cpu_beside,
         "meshes_side_by_side": beside,
-        "peak_rss_bytes": max(_peak_memory(), elsewhere["peak"]),
+        "peak_rss_bytes": max(_peak_memory(), peak),
         "force_ranks": [f.shape[1] for f in force.functions],
     }
     return Basis.from_build(config, problem, solution, force, stats)
@@ -91,21 +89,27 @@ def _solved(config: PGDConfig, rings: int, progress: Callable[[str], None]):
 
 def _coarse_force(config: PGDConfig, rings: int):
     """(β, parameter factors) of ``force_modes`` on the Richardson mesh of ``rings`` rings, solved as
-    ``build_basis`` solves it (one thread); the peak memory [B] and the CPU seconds of the process that solved it."""
+    ``build_basis`` solves it (one thread)."""
     with _one_thread():
         problem, solution = _solved(config, rings, lambda line: None)
-        return *force_modes(solution, problem.dims), _peak_memory(), time.process_time()
+        return force_modes(solution, problem.dims)
 
 
 @contextmanager
 def _forked(function: Callable, *args):
     """``function(*args)`` started in a forked process while the block runs: the value is the call that waits for
-    its result. The two meshes of a Richardson build are independent problems, each solved on one thread: on a
-    second core the build takes the fine mesh's time, to the same bits (pgd=default 1.8–3.0 s against 3.6–4.8 s
-    one after the other here). ``_may_fork`` says where a build does this."""
+    (its result, the peak memory [B] and the CPU seconds of that process). The two meshes of a Richardson build are
+    independent problems, each solved on one thread: on a second core the build takes the fine mesh's time, to the
+    same bits (pgd=default 1.8–3.0 s against 3.6–4.8 s one after the other here). ``_may_fork`` says where a build
+    does this."""
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
-        future = pool.submit(function, *args)
+        future = pool.submit(_measured, function, *args)
         yield future.result
+
+
+def _measured(function: Callable, *args):
+    """(``function(*args)``, the peak memory [B] and the CPU seconds of this process): a forked process's share."""
+    return function(*args), _peak_memory(), time.process_time()
 
 
 def _may_fork() -> bool:
