@@ -13,9 +13,8 @@ from collections.abc import Sequence
 
 import torch
 from torch import nn
-from torch.func import functional_call
 
-from ptwin.fitting.lm import ParameterVector, Traced
+from ptwin.fitting.lm import ParameterVector, Traced, evaluated_at
 from ptwin.physics.model import PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
 
@@ -176,7 +175,7 @@ class HybridResidual:
 
     def _prediction(self, part: str, theta: torch.Tensor) -> torch.Tensor:
         """The physics force or the network's correction on the samples [N] at θ."""
-        return functional_call(getattr(self.twin, part), self._own(part, theta), (self.samples,))[self.index]
+        return evaluated_at(getattr(self.twin, part), self._own(part, theta), self.samples)[self.index]
 
     def _assemble(self, physics: torch.Tensor, correction: torch.Tensor, theta: torch.Tensor) -> torch.Tensor:
         error = (self.force - physics) / self.noise

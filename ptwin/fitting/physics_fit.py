@@ -16,9 +16,8 @@ from dataclasses import dataclass, field
 import scipy.stats
 import torch
 from torch import nn
-from torch.func import functional_call
 
-from ptwin.fitting.lm import FitError, LevenbergMarquardt, ParameterVector, covariance
+from ptwin.fitting.lm import FitError, LevenbergMarquardt, ParameterVector, covariance, evaluated_at
 from ptwin.physics.model import PERMEABILITY, PLAUSIBLE_PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY, hidden_in_contacts
@@ -98,8 +97,7 @@ def scaled_residual(model, samples: Samples, index: torch.Tensor):
     force, noise = samples.force[index], samples.noise_floor[index]
 
     def residual(theta):
-        # No parameter of a ForceModel is tied to another: functional_call need not map ties at every evaluation.
-        predicted = functional_call(model, vector.as_dict(theta), (samples,), tie_weights=False)
+        predicted = evaluated_at(model, vector.as_dict(theta), samples)
         return (predicted[index] - force) / noise
 
     return vector, residual
