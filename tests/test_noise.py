@@ -4,6 +4,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import scipy.signal
+import scipy.stats
 
 from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.noise import (
@@ -11,6 +13,7 @@ from ptwin.data.noise import (
     SECOND_DIFFERENCES,
     SHORT_BASELINES,
     ar1_inflation,
+    autoregressive,
     baseline_noise,
     block_inflation,
     corrected,
@@ -24,6 +27,7 @@ from ptwin.data.noise import (
     with_std,
 )
 from ptwin.data.recordings import load_recordings, write_recordings
+from ptwin.data.tails import chi_square_exceeded, fisher_exceeded, normal_exceeded, student_t_exceeded
 from ptwin.synth.simulator import Experiment, correlated_noise, simulate
 from tests.conftest import OPEN_DATA, needs_open_data, settings_for, simulated_set
 
@@ -35,6 +39,26 @@ def ar1(lag1, size=20000, std=1.3e-11, seed=0):
 def mixed(rng, size, correlation_samples, white_share):
     """Unit-variance noise: a white part and an AR(1) part of the given correlation time (samples)."""
     return correlated_noise(rng, size, 1.0, np.exp(-1.0 / correlation_samples), white_share)
+
+
+@pytest.mark.parametrize("memory", [0.0, 0.5, 0.99])
+def test_the_autoregressive_filter_is_scipys_to_the_bit(memory):
+    rng = np.random.default_rng(4)
+    inputs, before, gain = rng.standard_normal((700, 30)), rng.standard_normal(30), np.sqrt(1.0 - memory**2)
+    scipys = scipy.signal.lfilter([gain], [1.0, -memory], inputs, axis=0, zi=memory * before[None, :])[0]
+    assert np.array_equal(autoregressive(inputs, memory, gain, before), scipys)
+    memories = np.array([0.0, 0.3, 0.95])  # one filter per φ, broadcast along a new last axis
+    each = np.stack([scipy.signal.lfilter([1.0], [1.0, -m], inputs, axis=0) for m in memories], axis=2)
+    assert np.array_equal(autoregressive(inputs[:, :, None], memories), each)
+
+
+@pytest.mark.parametrize("probability", [0.5, 0.01, 1e-4])
+def test_the_tail_quantiles_are_scipy_stats_to_the_bit(probability):
+    assert chi_square_exceeded(probability, 3) == scipy.stats.chi2.ppf(1.0 - probability, 3)
+    assert chi_square_exceeded(probability, 7.5) == scipy.stats.chi2.ppf(1.0 - probability, 7.5)
+    assert student_t_exceeded(probability, 4) == scipy.stats.t.ppf(1.0 - probability, 4)
+    assert fisher_exceeded(probability, 2, 37.5) == scipy.stats.f.ppf(1.0 - probability, 2, 37.5)
+    assert normal_exceeded(probability) == scipy.stats.norm.isf(probability)
 
 
 def test_simulated_noise_with_a_white_floor_has_the_noise_models_autocorrelation():

@@ -40,9 +40,9 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-import scipy.stats
 
 from ptwin.data.noise import fit_correlation, model_inflation, robust_std, settled
+from ptwin.data.tails import chi_square_exceeded, student_t_exceeded
 
 DEPARTURE = 5.0  # robust standard deviations above the first baseline where contact has begun
 SCAN = 101  # candidate contact depths per grid of the refinement
@@ -127,7 +127,7 @@ class LevelsWithSpeed:
     @property
     def consistent(self) -> bool:
         """The levels are one level plus drag: χ² within the model's (1 − ``REJECT``) quantile."""
-        return self.chi_square <= scipy.stats.chi2.ppf(1.0 - REJECT, self.dof)
+        return self.chi_square <= chi_square_exceeded(REJECT, self.dof)
 
     @property
     def rise(self) -> float:
@@ -140,7 +140,7 @@ class LevelsWithSpeed:
         """The levels are one level plus drag, and they rise with speed beyond what free per-curve offsets of
         their scatter would, one time in 1/``REJECT``: only then is the drag kept in the force. Levels that
         merely do not contradict a line (five random offsets that happen to order with speed) are offsets."""
-        return self.consistent and self.rise > scipy.stats.t.ppf(1.0 - REJECT, self.dof)
+        return self.consistent and self.rise > student_t_exceeded(REJECT, self.dof)
 
 
 def levels_with_speed(levels: np.ndarray, stds: np.ndarray, speeds: np.ndarray) -> LevelsWithSpeed | None:

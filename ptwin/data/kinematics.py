@@ -37,11 +37,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-import scipy.stats
 
 from ptwin.data.contact import Baseline, NoBaseline, estimate_baseline, levels_with_speed
 from ptwin.data.noise import NoiseModel, curve_noise, robust_std, with_std
 from ptwin.data.recordings import APPROACH, RETRACT, SEGMENTS, RecordingError, RecordingSet
+from ptwin.data.tails import normal_exceeded
 
 PINNING_TRAVEL = 0.25  # the last fraction of an approach's free travel, fitted with an estimated contact
 UNRESOLVED_FALSE_ALARM = 0.01  # samples of a curve that noise alone marks unresolved, expected
@@ -165,7 +165,7 @@ def unresolved_motion(time: np.ndarray, depth: np.ndarray, tested: np.ndarray) -
     typical = robust_std(scaled[inner])
     if not typical > 0:
         return unresolved
-    limit = scipy.stats.norm.isf(UNRESOLVED_FALSE_ALARM / (2 * inner.sum())) * typical
+    limit = normal_exceeded(UNRESOLVED_FALSE_ALARM / (2 * inner.sum())) * typical
     unresolved[index[1:-1]] = inner & (np.abs(scaled) > limit)
     return unresolved
 

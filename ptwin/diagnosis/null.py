@@ -33,11 +33,10 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.signal
-import scipy.stats
 import torch
 
-from ptwin.data.noise import NoiseModel
+from ptwin.data.noise import NoiseModel, autoregressive
+from ptwin.data.tails import chi_square_exceeded, fisher_exceeded
 from ptwin.physics.elastic import ReferenceCurve
 from ptwin.physics.samples import Samples
 
@@ -55,8 +54,8 @@ class ScaledF:
 
     def quantile(self, false_alarm: float) -> float:
         if math.isinf(self.noise_blocks):
-            return self.scale * scipy.stats.chi2.ppf(1.0 - false_alarm, self.dof) / self.dof
-        return self.scale * scipy.stats.f.ppf(1.0 - false_alarm, self.dof, self.noise_blocks)
+            return self.scale * chi_square_exceeded(false_alarm, self.dof) / self.dof
+        return self.scale * fisher_exceeded(false_alarm, self.dof, self.noise_blocks)
 
     @classmethod
     def of(cls, draws: np.ndarray, noise_blocks: float) -> ScaledF:
@@ -154,9 +153,7 @@ def _draw(rng: np.random.Generator, size: int, noise: NoiseModel) -> np.ndarray:
         return white
     start = rng.standard_normal((1, REPLICATES))
     innovations = rng.standard_normal((size, REPLICATES))
-    correlated = scipy.signal.lfilter(
-        [math.sqrt(1.0 - memory**2)], [1.0, -memory], innovations, axis=0, zi=memory * start
-    )[0]
+    correlated = autoregressive(innovations, memory, math.sqrt(1.0 - memory**2), start[0])
     return math.sqrt(1.0 - share) * white + math.sqrt(share) * correlated
 
 
@@ -223,8 +220,8 @@ def term_evidence(
     inflation = test.inflation_along(shape)
     scale = inflation * max(1.0, larger / samples)
     if math.isinf(test.noise_blocks):
-        quantile = scipy.stats.chi2.ppf(1.0 - false_alarm, parameters)
+        quantile = chi_square_exceeded(false_alarm, parameters)
     else:
-        quantile = parameters * scipy.stats.f.ppf(1.0 - false_alarm, parameters, test.noise_blocks)
+        quantile = parameters * fisher_exceeded(false_alarm, parameters, test.noise_blocks)
     threshold = (math.sqrt(samples * MODEL_ERROR**2 / scale) + math.sqrt(quantile)) ** 2
     return TermEvidence(term, (smaller - larger) / scale, threshold, inflation, false_alarm)

@@ -13,10 +13,10 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-import scipy.stats
 import torch
 from torch import nn
 
+from ptwin.data.tails import chi_square_exceeded
 from ptwin.fitting.lm import FitError, LevenbergMarquardt, ParameterVector, covariance, evaluated_at
 from ptwin.physics.model import PERMEABILITY, PLAUSIBLE_PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
@@ -419,7 +419,7 @@ def _moved_where_it_gains(held: PhysicsFit, later: list, samples, index, iterati
     if moved.physical != held.physical:
         return moved if moved.physical else held
     gain = (held.chi_square - moved.chi_square) / held.inflation
-    return moved if gain > scipy.stats.chi2.ppf(1.0 - MOVE_FALSE_ALARM, 1) else held
+    return moved if gain > chi_square_exceeded(MOVE_FALSE_ALARM, 1) else held
 
 
 def _best(models, samples, index, iterations, reference_free) -> PhysicsFit:

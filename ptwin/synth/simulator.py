@@ -23,11 +23,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
-import scipy.signal
 import torch
 from scipy.integrate import solve_ivp
 
 from ptwin.data.kinematics import contact_radius
+from ptwin.data.noise import autoregressive
 from ptwin.data.recordings import APPROACH, CREEP, HOLD, SEGMENTS, Meta
 from ptwin.pgd.reference import force_coefficient
 from ptwin.physics.elastic import hertz_force, hertz_stiffness
@@ -413,7 +413,7 @@ def correlated_noise(
     if lag1 == 0.0:
         return white
     first = white[:1]
-    rest = scipy.signal.lfilter([np.sqrt(1.0 - lag1**2)], [1.0, -lag1], white[1:], zi=lag1 * first)[0]
+    rest = autoregressive(white[1:], lag1, np.sqrt(1.0 - lag1**2), first[0])
     correlated = np.concatenate([first, rest])
     if white_share == 0.0:
         return correlated
