@@ -50,6 +50,8 @@ def test_the_autoregressive_filter_is_scipys_to_the_bit(memory):
     memories = np.array([0.0, 0.3, 0.95])  # one filter per φ, broadcast along a new last axis
     each = np.stack([scipy.signal.lfilter([1.0], [1.0, -m], inputs, axis=0) for m in memories], axis=2)
     assert np.array_equal(autoregressive(inputs[:, :, None], memories), each)
+    one = scipy.signal.lfilter([gain], [1.0, -memory], inputs[:, 0], zi=[memory * before[0]])[0]  # a single record
+    assert np.array_equal(autoregressive(inputs[:, 0], memory, gain, before[0]), one)
 
 
 @pytest.mark.parametrize("probability", [0.5, 0.01, 1e-4])

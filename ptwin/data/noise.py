@@ -119,11 +119,26 @@ def autoregressive(inputs: np.ndarray, memory, gain: float = 1.0, before=None) -
     ``scipy.signal.lfilter([gain], [1, −φ], x, axis=0, zi=φ·before)`` to the bit, a row at a time over every
     column: importing scipy.signal costs 0.9 s beside torch, more than the filtering of a whole run."""
     rows = np.broadcast_shapes(inputs.shape[1:], np.shape(memory))
-    outputs = np.empty(inputs.shape[:1] + rows)
-    previous = np.zeros(rows) if before is None else before
-    for t, row in enumerate(inputs):
-        previous = outputs[t] = gain * row + memory * previous
+    outputs = np.broadcast_to(gain * inputs, inputs.shape[:1] + rows).copy()  # gain·x_t, then φ·y_{t−1} added
+    memory = np.broadcast_to(memory, rows).reshape(-1)
+    carried = memory * (0.0 if before is None else np.broadcast_to(before, rows).reshape(-1))
+    columns = outputs.reshape(len(outputs), -1)
+    if columns.shape[1] == 1:  # one record: Python's floats round as numpy's do, without two ufunc calls a sample
+        _one_record(columns[:, 0], float(memory[0]), float(carried[0]))
+        return outputs
+    for row in columns:  # in place, two ufuncs a row
+        np.add(row, carried, out=row)
+        np.multiply(row, memory, out=carried)
     return outputs
+
+
+def _one_record(record: np.ndarray, memory: float, carried: float) -> None:
+    """``autoregressive`` in place on one record of gain·x_t, from φ·y_{−1} = ``carried``."""
+    values = record.tolist()
+    for t, value in enumerate(values):
+        values[t] = value + carried
+        carried = memory * values[t]
+    record[:] = values
 
 
 def _apply_ar(columns: np.ndarray, memories: np.ndarray) -> np.ndarray:
