@@ -57,3 +57,19 @@ def test_log_axes_read_as_matplotlibs_own_in_unicode_and_label_minor_ticks_only_
     assert labels(1.2e-16, 3e-16) == (["10⁻¹⁶", "10⁻¹⁵"], ["2×10⁻¹⁶", "3×10⁻¹⁶", "4×10⁻¹⁶", "6×10⁻¹⁶"])
     assert labels(2.0, 80.0) == (["10⁰", "10¹", "10²"], [])
     assert labels(1e-3, 1e2) == (["10⁻⁴", "10⁻³", "10⁻²", "10⁻¹", "10⁰", "10¹", "10²", "10³"], [])
+
+
+def test_a_speed_axis_is_ticked_and_labelled_at_the_speeds_measured():
+    # Two decades of speeds had held a single decade label; a reader looks for the curves' own speeds.
+    from ptwin.reporting.figures import _speed_axis
+
+    figure, ax = plt.subplots(figsize=(4.5, 3))
+    speeds = [0.5e-6 * 1e6, 2.0, 8.0, 40.0, 80.0, float("nan")]  # µm/s, as the figures compute them
+    ax.plot(speeds, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0], "o")
+    _speed_axis(ax, speeds)
+    figure.canvas.draw()
+    labelled = [(tick, label.get_text()) for tick, label in zip(ax.get_xticks(), ax.get_xticklabels())]
+    minor = [label.get_text() for label in ax.get_xticklabels(minor=True) if label.get_text()]
+    plt.close(figure)
+    assert labelled == [(0.5, "0.5"), (2.0, "2"), (8.0, "8"), (40.0, "40"), (80.0, "80")]
+    assert minor == []

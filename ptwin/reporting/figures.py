@@ -223,6 +223,17 @@ def _apparent_against_depth(samples, index, apparent):
     return figure
 
 
+def _speed_axis(ax, speeds) -> None:
+    """A log x axis of base speed [µm/s] ticked at the speeds measured (``speeds`` [µm/s]), each labelled as
+    recorded: a reader looks for the curves, not for decades, and 2–80 µm/s had read one label, "10¹"."""
+    ax.set_xscale("log")
+    measured = sorted({float(speed) for speed in speeds if np.isfinite(speed) and speed > 0})
+    ax.xaxis.set_major_locator(matplotlib.ticker.FixedLocator(measured))
+    ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda speed, _: f"{speed:g}"))
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_xlabel("base speed [µm/s]")
+
+
 def _speeds(apparent, curves) -> np.ndarray:
     """Base speed [m/s] of each of ``curves``."""
     return np.array([apparent.plateau[curve]["base_speed"] for curve in curves])
@@ -247,9 +258,7 @@ def _permeability_against_speed(apparent, base, corrected_per_curve):
             label="K per speed, corrected model",
         )
     ax.axhline(base.permeability, color="grey", ls="--", lw=1, label="global K, base model")
-    _logarithmic(ax, "x")
-    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    ax.set_xlabel("base speed [µm/s]")
+    _speed_axis(ax, [row["base_speed"] * MICRO for row in apparent.plateau.values()])
     ax.set_ylabel("K [m²]")
     if np.isfinite(apparent.slope) and np.isfinite(apparent.slope_std):
         ax.set_title(f"K against speed: slope {apparent.slope:.2g} ± {apparent.slope_std:.1g} m²/decade")
@@ -278,8 +287,7 @@ def _viscous_per_speed(apparent, fits, term):
     ax2.plot(speeds * MICRO, [f.permeability for f in fits], "o")
     ax2.set_ylabel("K [m²]")
     for ax in (ax1, ax2):
-        _logarithmic(ax, "x")
-        ax.set_xlabel("base speed [µm/s]")
+        _speed_axis(ax, speeds * MICRO)
     figure.suptitle(f"(K, {parameter}) per speed, Gauss–Newton with {term}")
     tight(figure)
     return figure
