@@ -52,6 +52,8 @@ def test_the_autoregressive_filter_is_scipys_to_the_bit(memory):
     assert np.array_equal(autoregressive(inputs[:, :, None], memories), each)
     one = scipy.signal.lfilter([gain], [1.0, -memory], inputs[:, 0], zi=[memory * before[0]])[0]  # a single record
     assert np.array_equal(autoregressive(inputs[:, 0], memory, gain, before[0]), one)
+    assert autoregressive(inputs[:0], memory).shape == (0, 30)  # an empty record, as lfilter takes it
+    assert autoregressive(inputs[:0, 0], memory).shape == (0,)
 
 
 @pytest.mark.parametrize("probability", [0.5, 0.01, 1e-4])

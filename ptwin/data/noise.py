@@ -116,13 +116,13 @@ def correlation_time(memory: float, step: float) -> float:
 def autoregressive(inputs: np.ndarray, memory, gain: float = 1.0, before=None) -> np.ndarray:
     """y_t = gain·x_t + φ·y_{t−1} along the first axis of ``inputs`` x, from y_{−1} = ``before`` (0 where None);
     ``memory`` φ, one or an array broadcasting against a row of x (a filter per φ). It is
-    ``scipy.signal.lfilter([gain], [1, −φ], x, axis=0, zi=φ·before)`` to the bit, a row at a time over every
-    column: importing scipy.signal costs 0.9 s beside torch, more than the filtering of a whole run."""
+    ``scipy.signal.lfilter([gain], [1, −φ], x, axis=0, zi=φ·before)`` to the bit, a row at a time in place (one
+    record in Python floats): importing scipy.signal costs 0.9 s beside torch, more than a run's filtering."""
     rows = np.broadcast_shapes(inputs.shape[1:], np.shape(memory))
     outputs = np.broadcast_to(gain * inputs, inputs.shape[:1] + rows).copy()  # gain·x_t, then φ·y_{t−1} added
     memory = np.broadcast_to(memory, rows).reshape(-1)
     carried = memory * (0.0 if before is None else np.broadcast_to(before, rows).reshape(-1))
-    columns = outputs.reshape(len(outputs), -1)
+    columns = outputs.reshape(len(outputs), math.prod(rows))
     if columns.shape[1] == 1:  # one record: Python's floats round as numpy's do, without two ufunc calls a sample
         _one_record(columns[:, 0], float(memory[0]), float(carried[0]))
         return outputs
