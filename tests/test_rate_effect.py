@@ -17,14 +17,21 @@ STIFF = dict(
 )
 
 
-def effect_of(tmp_path, **effects):
-    write_recordings(tmp_path, *simulate(Experiment(**STIFF, effects=effects)))
+@pytest.fixture(scope="module")
+def power_law():
+    """The STIFF set with a power law (alpha 0.05), simulated once for the three tests that read it (~7 s each:
+    its kernel's modes make the simulator's state equations stiff and wide)."""
+    return simulate(Experiment(**STIFF, effects={"power_law_rheology": {"alpha": 0.05}}))
+
+
+def effect_of(tmp_path, meta, frame):
+    write_recordings(tmp_path, meta, frame)
     curves = curve_kinematics(load_recordings(tmp_path))
     return rate_effect(curves, curves[0])
 
 
-def test_a_power_law_scales_the_force_by_the_speed_ratio_to_the_alpha(tmp_path):
-    effect = effect_of(tmp_path, power_law_rheology={"alpha": 0.05})
+def test_a_power_law_scales_the_force_by_the_speed_ratio_to_the_alpha(tmp_path, power_law):
+    effect = effect_of(tmp_path, *power_law)
     for profile in effect.profiles:
         assert profile.median == pytest.approx(profile.speed_ratio**0.05, abs=2e-3)
         shallow, deep = profile.ends()
@@ -33,7 +40,7 @@ def test_a_power_law_scales_the_force_by_the_speed_ratio_to_the_alpha(tmp_path):
 
 
 def test_a_viscous_network_adds_an_excess_that_grows_linearly_with_speed(tmp_path):
-    effect = effect_of(tmp_path, solid_viscosity={"gamma": 40.0})
+    effect = effect_of(tmp_path, *simulate(Experiment(**STIFF, effects={"solid_viscosity": {"gamma": 40.0}})))
     assert "grows linearly with speed" in effect.sentence()
 
 
@@ -45,10 +52,10 @@ def test_one_speed_ratio_says_it_cannot_tell_the_growth(tmp_path):
     assert math.isfinite(rate_effect(curves, curves[0]).profiles[0].median)
 
 
-def test_a_faster_curve_softer_than_the_reference_is_said_to_differ_by_more_than_rate(tmp_path):
+def test_a_faster_curve_softer_than_the_reference_is_said_to_differ_by_more_than_rate(tmp_path, power_law):
     # Real agarose B: its 15 µm/s curve, from another spot, at 0.71–0.83 of the 5 µm/s one at equal depth. Here the
     # fastest of a power-law set is scaled to 80% (a spot a fifth softer): said, with its ratio; the others not.
-    meta, frame = simulate(Experiment(**STIFF, effects={"power_law_rheology": {"alpha": 0.05}}))
+    meta, frame = power_law[0], power_law[1].copy()
     fastest = frame["curve"] == frame["curve"].unique()[-1]
     frame.loc[fastest, "force"] *= 0.8
     write_recordings(tmp_path, meta, frame)
@@ -63,4 +70,4 @@ def test_a_faster_curve_softer_than_the_reference_is_said_to_differ_by_more_than
     )
     assert "differ by more than rate" in sentence and curves[1].curve + " 1." not in sentence.split("Faster")[1]
     assert "Growth with speed" not in sentence  # a negative excess has no growth to read
-    assert "Faster yet softer" not in effect_of(tmp_path / "clean", power_law_rheology={"alpha": 0.05}).sentence()
+    assert "Faster yet softer" not in effect_of(tmp_path / "clean", *power_law).sentence()
