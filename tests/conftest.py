@@ -99,10 +99,16 @@ def run(folder, cache, output, *overrides, figures: bool = False) -> RunResult:
 
 
 @pytest.fixture(scope="session")
-def clean_run(tmp_path_factory, coarse_cache):
-    folder = simulated_set(tmp_path_factory.mktemp("clean"))
+def default_set(tmp_path_factory) -> Path:
+    """``simulated_set`` as it comes (nothing concealed), simulated once a worker (2 s): its readers read it and
+    write elsewhere."""
+    return simulated_set(tmp_path_factory.mktemp("default"))
+
+
+@pytest.fixture(scope="session")
+def clean_run(default_set, tmp_path_factory, coarse_cache):
     output = tmp_path_factory.mktemp("clean_run")
-    return run(folder, coarse_cache, output, figures=True), output
+    return run(default_set, coarse_cache, output, figures=True), output
 
 
 @pytest.fixture(scope="session")

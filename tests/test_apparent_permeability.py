@@ -12,14 +12,14 @@ from ptwin.diagnosis.words import _trend
 from ptwin.fitting.physics_fit import fit_physics
 from ptwin.fitting.pointwise import _weighted_slope, apparent_permeability
 from ptwin.pipeline.prepare import prepare
-from tests.conftest import settings_for, simulated_set
+from tests.conftest import settings_for
 
 
 @pytest.fixture(scope="module")
-def fitted_set(tmp_path_factory, coarse_cache):
+def fitted_set(default_set, coarse_cache):
     """A simulated set, prepared, and its base model fitted (shared by the tests that read its plateaus)."""
-    folder = simulated_set(tmp_path_factory.mktemp("set"))
-    prepared = prepare(settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda _: None)
+    settings = settings_for(f"data.path={default_set}", "pgd=coarse", f"cache_dir={coarse_cache}")
+    prepared = prepare(settings, lambda _: None)
     return prepared, fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
 
 

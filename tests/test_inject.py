@@ -37,9 +37,9 @@ def inject_settings(folder, cache, *overrides):
     return typed(cfg)
 
 
-def test_a_viscous_force_added_reaches_the_recording_through_the_cantilever_balance(tmp_path, coarse_cache):
+def test_a_viscous_force_added_reaches_the_recording_through_the_cantilever_balance(default_set, coarse_cache):
     # πγRU at the tip; the recording sees k/(k + s) of it, s the contact stiffness: less where the sample is stiff.
-    settings = inject_settings(simulated_set(tmp_path / "set"), coarse_cache)
+    settings = inject_settings(default_set, coarse_cache)
     prepared = prepare(settings, progress=lambda _: None)
     added = added_force(prepared, "solid_viscosity", {"gamma": 5.0})
     fast = next(c for c in prepared.curves if c.curve == "v80")
@@ -77,10 +77,8 @@ def test_a_term_added_starts_where_the_elastic_force_does_whatever_the_reference
     assert np.abs(shown).max() > 0
 
 
-def test_a_viscosity_added_to_a_set_is_found_with_its_size(tmp_path, coarse_cache):
-    settings = inject_settings(
-        simulated_set(tmp_path / "set"), coarse_cache, "inject.sizes=[1.0]", "diagnosis.design=false"
-    )
+def test_a_viscosity_added_to_a_set_is_found_with_its_size(default_set, tmp_path, coarse_cache):
+    settings = inject_settings(default_set, coarse_cache, "inject.sizes=[1.0]", "diagnosis.design=false")
     trials = detection(settings, tmp_path / "run", progress=lambda _: None)
     as_recorded, added = trials
     assert not as_recorded.confidence  # the clean set names nothing, and says what gamma fitted alone came to
@@ -300,13 +298,13 @@ def test_values_that_do_not_match_the_terms_parameters_are_refused_in_one_line()
         InjectSettings("solid_relaxation", [5.0])
 
 
-def test_each_terms_sizes_are_read_off_its_added_force_weak_to_strong(tmp_path, coarse_cache):
+def test_each_terms_sizes_are_read_off_its_added_force_weak_to_strong(default_set, coarse_cache):
     # The ladder's sizes reach the peaks asked for (bracketed on a grid of the added force, then bisected), the pore
     # term's by a smaller M (its strength grows as M falls).
     from ptwin.fitting.physics_fit import fit_physics
     from ptwin.pipeline.inject import LADDER, _ladder
 
-    settings = inject_settings(simulated_set(tmp_path / "set"), coarse_cache)
+    settings = inject_settings(default_set, coarse_cache)
     prepared = prepare(settings, progress=lambda _: None)
     base = fit_physics(prepared.make_model(), prepared.samples, prepared.split.train)
     for term in ("solid_viscosity", "pore_pressure_relaxation"):
@@ -412,10 +410,8 @@ def test_a_term_whose_sizes_stop_short_of_the_ladder_says_where_its_peak_stays()
 
 
 @pytest.mark.slow
-def test_the_detection_limit_of_every_candidate_term_is_in_the_report(tmp_path, coarse_cache):
-    settings = inject_settings(
-        simulated_set(tmp_path / "set"), coarse_cache, "inject.term=all", "diagnosis.terms=[solid_viscosity]"
-    )
+def test_the_detection_limit_of_every_candidate_term_is_in_the_report(default_set, tmp_path, coarse_cache):
+    settings = inject_settings(default_set, coarse_cache, "inject.term=all", "diagnosis.terms=[solid_viscosity]")
     lines = []
     found = detection_limits(settings, tmp_path / "run", progress=lines.append)
     trials = found["solid_viscosity"]

@@ -71,8 +71,8 @@ def test_an_estimated_contact_is_pinned_by_the_free_travel_just_before_it_and_th
     assert samples.pins_contact[seen].sum() == samples.pins_contact.sum()
 
 
-def test_a_known_contact_pins_nothing(tmp_path):
-    curves = curve_kinematics(load_recordings(simulated_set(tmp_path)))
+def test_a_known_contact_pins_nothing(default_set):
+    curves = curve_kinematics(load_recordings(default_set))
     assert not any(c.pins_contact.any() for c in curves)
 
 
