@@ -114,8 +114,10 @@ def clean_run(default_set, tmp_path_factory, coarse_cache):
 @pytest.fixture(scope="session")
 def viscous_run(tmp_path_factory, coarse_cache):
     folder = simulated_set(tmp_path_factory.mktemp("viscous"), effects={"solid_viscosity": {"gamma": 5.0}})
-    # its tests read what is named and fitted, not the experiment proposed (seconds of simulation and refits)
-    return run(folder, coarse_cache, tmp_path_factory.mktemp("viscous_run"), "diagnosis.design=false")
+    # its tests read what is named and fitted, not the experiment proposed (seconds of simulation and refits), and
+    # the viscosity's strength fitted alone, profiled as python -m ptwin.inject asks
+    output = tmp_path_factory.mktemp("viscous_run")
+    return run(folder, coarse_cache, output, "diagnosis.design=false", "diagnosis.profiled=[solid_viscosity]")
 
 
 @pytest.fixture(scope="session")

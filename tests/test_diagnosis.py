@@ -36,6 +36,17 @@ def test_clean_data_no_mismatch_no_term(clean_run):
     assert json.loads((output / "diagnosis.json").read_text()) == diagnosis
 
 
+def test_a_profiled_strength_fitted_alone_gets_the_interval_of_its_own_fit(viscous_run):
+    # What python -m ptwin.inject says of a size not named: the strength fitted alone, as the data fix it. Here 5 Pa·s
+    # is concealed; the fit of the viscosity alone is the named model.
+    outcome = viscous_run
+    gamma = outcome.candidates["solid_viscosity"]["gamma"]
+    low, high = outcome.alone["solid_viscosity"]
+    assert set(outcome.alone) == {"solid_viscosity"} and low < gamma < high and low < 5.0 < high
+    named = next(e for e in outcome.diagnosis["left_out"] if e["term"] == "solid_viscosity")
+    assert [low, high] == pytest.approx(named["param_interval"]["gamma"], rel=1e-6)  # the same profile
+
+
 def test_a_noise_std_the_twins_residual_says_may_read_low_is_said_with_its_bound(clean_run, tmp_path, coarse_cache):
     # train.py keeps a σ read off second differences as it is (what the twin misses would correct it upwards), so
     # where the twin's residual is correlated enough that σ may read far low, a note says by how much at most. AR(1)

@@ -140,6 +140,23 @@ def test_other_terms_the_recordings_name_as_they_are_are_said_to_be_theirs():
     assert _trial(0.0, None, 0.0, recorded, "solid_viscosity", "gamma").recorded == ()
 
 
+def test_a_strength_fitted_alone_is_said_as_the_data_fix_it():
+    # Bench-set p03 (real PAAm noise) with a solid relaxation of 32× the noise added (g 0.164): "not named (g 4.46
+    # fitted alone)", the value a flat profile left the fit at. Profiled (``Diagnosis.alone``), it is said as a bound.
+    from dataclasses import replace
+
+    flat = Trial(32.0, 0.164, 32.0, "", None, [None, None], False, True, 4.46, alone_interval=[None, None])
+    own = Own("g", 0.0806)
+    assert flat.verdict(own) == "not named (g fitted alone: not fixed by these data)"
+    closed = replace(flat, alone=0.55, alone_interval=[0.292, 1.86])
+    assert closed.verdict(own) == "not named (g fitted alone: 0.55 (95%: 0.292 to 1.86))"
+    above = replace(flat, alone_interval=[0.3, None])
+    assert above.verdict(own) == "not named (g fitted alone: > 0.3 (95%; the data set no upper limit))"
+    structured = replace(flat, alone_interval=None, alone_misses_data=True, unexplained=True)
+    assert structured.verdict(own).startswith("unexplained (g fitted alone: 4.46 (from a model that misses the data")
+    assert replace(flat, alone_interval=None).verdict(own) == "not named (g 4.46 fitted alone)"  # not profiled
+
+
 def test_a_term_read_as_another_it_cannot_be_told_from_says_so():
     # Real-noise PAAm null (bench-set p03) with g 0.33 of solid_relaxation added: the diagnosis named
     # strain_dependent_permeability (weak) and listed the two as confounded; the verdict read as a wrong answer.

@@ -63,11 +63,15 @@ class DiagnosisSettings:
     block: int = 50  # samples per block of the whiteness test
     false_alarm: float = 0.01  # how often noise alone reads as structure, or as a held-out gain
     design: bool = True  # propose the recording that separates confounded candidates (simulated; seconds)
+    # Terms whose strength fitted alone beside the base model gets its 95% profile interval (``Diagnosis.alone``):
+    # what ``python -m ptwin.inject`` says of a size it added and the diagnosis did not name.
+    profiled: list[str] = field(default_factory=list)
 
     def __post_init__(self):
-        unknown = [t for t in self.terms if t not in VOCABULARY]
-        if unknown:
-            raise ValueError(f"diagnosis.terms: unknown {unknown}; the vocabulary is {', '.join(VOCABULARY)}")
+        for key in ("terms", "profiled"):
+            unknown = [t for t in getattr(self, key) if t not in VOCABULARY]
+            if unknown:
+                raise ValueError(f"diagnosis.{key}: unknown {unknown}; the vocabulary is {', '.join(VOCABULARY)}")
         if self.max_terms < 0:
             raise ValueError(f"diagnosis.max_terms must be ≥ 0, got {self.max_terms}")
         if not 0.0 < self.false_alarm < 0.5:
@@ -102,6 +106,9 @@ class Diagnosis:
     notes: list[str] = field(default_factory=list)
     predictions: list[Prediction] = field(default_factory=list)  # of each proposed next experiment
     evidence: dict[str, TermEvidence] = field(default_factory=dict)  # of each usable subset over the base model
+    # Of each of ``DiagnosisSettings.profiled`` whose physical fit alone beside the base model there is: its strength's
+    # 95% profile interval, or None where that fit leaves structure (no interval holds).
+    alone: dict[str, list[float | None] | None] = field(default_factory=dict)
 
     @property
     def base(self) -> Candidate:
@@ -235,6 +242,7 @@ def diagnose(
         notes=notes,
         predictions=predictions,
         evidence=evidence,
+        alone={term: _alone_interval(term, context, test) for term in s.profiled if _physical(candidates, (term,))},
     )
     diagnosis.summary = summarise(diagnosis, apparent, test)
     return diagnosis
@@ -720,23 +728,43 @@ def _raw_interval(fit: PhysicsFit, raw_name: str, raw_std: float, c: _Context):
     return profile_interval(fit, raw_name, raw_std, c.samples, c.split.train)
 
 
+def _physical(candidates: dict, terms: tuple[str, ...]) -> bool:
+    return terms in candidates and candidates[terms].fit is not None and candidates[terms].fit.physical
+
+
+def _alone_interval(term: str, c: _Context, test: StructureTest) -> list[float | None] | None:
+    """The 95% profile interval of ``term``'s strength (its first parameter) fitted alone beside the base model;
+    None where that fit leaves structure, which no interval of its model bounds."""
+    candidate = c.candidates[(term,)]
+    if candidate.leaves_structure(test):
+        return None
+    return parameter_interval(candidate.fit, term, next(iter(VOCABULARY[term].PARAMS)), c.samples, c.split.train)
+
+
 def _parameter_intervals(fit: PhysicsFit, term: str, c: _Context) -> dict[str, list[float | None]]:
-    """95% profile-likelihood intervals of the term's parameters, physical units (None: not bounded), a closed
-    side beyond a physical limit (gamma ≥ 0) drawn back to it."""
+    """95% profile-likelihood intervals of the term's parameters (``parameter_interval``)."""
+    names = fit.model.terms[term].PARAMS
+    return {name: parameter_interval(fit, term, name, c.samples, c.split.train) for name in names}
+
+
+def parameter_interval(
+    fit: PhysicsFit, term: str, name: str, samples: Samples, index: torch.Tensor
+) -> list[float | None]:
+    """The 95% profile-likelihood interval of ``term``'s parameter ``name`` in ``fit``, on ``samples[index]`` (the
+    samples it was fitted on), physical units (None: not bounded), a closed side beyond a physical limit (gamma ≥
+    0) drawn back to it."""
     module = fit.model.terms[term]
-    intervals = {}
-    for name, parameter in module.PARAMS.items():
-        value, std = fit.params[term][name], fit.param_std[term][name]
-        raw_std = std / abs(value) if parameter.log and value else std
-        low, high = _raw_interval(fit, f"terms.{term}.{module.raw_name(name)}", raw_std, c)
-        to_value = _exp_or_none if parameter.log else _float_or_none
-        low, high = to_value(low), to_value(high)
-        if low is not None and parameter.minimum is not None:
-            low = max(low, parameter.minimum)
-        if high is not None and parameter.maximum is not None:
-            high = min(high, parameter.maximum)
-        intervals[name] = [low, high]
-    return intervals
+    parameter = module.PARAMS[name]
+    value, std = fit.params[term][name], fit.param_std[term][name]
+    raw_std = std / abs(value) if parameter.log and value else std
+    low, high = profile_interval(fit, f"terms.{term}.{module.raw_name(name)}", raw_std, samples, index)
+    to_value = _exp_or_none if parameter.log else _float_or_none
+    low, high = to_value(low), to_value(high)
+    if low is not None and parameter.minimum is not None:
+        low = max(low, parameter.minimum)
+    if high is not None and parameter.maximum is not None:
+        high = min(high, parameter.maximum)
+    return [low, high]
 
 
 def _absence(name: str, value: float) -> str:

@@ -103,6 +103,10 @@ class Trial:
     recorded: tuple[str, ...] = ()  # the terms of ``others`` the diagnosis of the recordings as they are names too
     why: tuple[str, ...] = ()  # where it was not named: the diagnosis's notes on the term (which rule left it out)
     permeability: float | None = None  # the base model's K in this diagnosis [m²]
+    # of ``alone``, where its diagnosis profiled it (``Diagnosis.alone``): its 95% interval, or none where that fit
+    # leaves structure (``alone_misses_data``); None: not profiled (its fit is not physical)
+    alone_interval: list[float | None] | None = None
+    alone_misses_data: bool = False
 
     def verdict(self, own: Own) -> str:
         """What the diagnosis said of the term, in words, and of any other term it named (a term added and
@@ -121,7 +125,7 @@ class Trial:
             if not self.candidate:
                 fitted = "no candidate in these recordings"
             else:
-                fitted = None if self.alone is None else f"{strength} {self.alone:.3g} fitted alone"
+                fitted = None if self.alone is None else f"{strength} {self._alone_words()}"
             base = None if self.permeability is None else f"the base model's K {permeability_words(self.permeability)}"
             what = "; ".join(part for part in (fitted, base) if part)
             return f"{said} ({what}){others}" if what else f"{said}{others}"
@@ -141,6 +145,14 @@ class Trial:
     def found_words(self) -> str:
         """The strength found, with its 95% interval where one holds (``bounded``)."""
         return bounded(self.found, self.interval, ".3g", misses_data=self.unexplained)
+
+    def _alone_words(self) -> str:
+        """The strength fitted alone as the data fix it (``bounded``), where its diagnosis profiled it; else the
+        value (a fit that is not physical). Bench-set p03 with a solid relaxation of 32× the noise added (g 0.164)
+        said "g 4.46 fitted alone", a flat direction's value: now "g fitted alone: not fixed by these data"."""
+        if self.alone_interval is None and not self.alone_misses_data:
+            return f"{self.alone:.3g} fitted alone"
+        return "fitted alone: " + bounded(self.alone, self.alone_interval, ".3g", misses_data=self.alone_misses_data)
 
     def _as_recorded(self) -> str:
         """Words for the other terms named that the recordings as they are name too: the added term was not read
@@ -267,7 +279,7 @@ def detection_limits(
 def _as_recorded(settings: InjectRunSettings, output_dir: Path) -> tuple[RunResult, Prepared, PhysicsFit]:
     """The recordings as they are: diagnosed as train.py would (its output in ``output_dir/as-recorded``), prepared,
     and the base model fitted to their training samples (what every term is added on)."""
-    as_recorded = run(settings, output_dir / "as-recorded", _quiet)
+    as_recorded = run(_profiling(settings, settings.diagnosis.terms), output_dir / "as-recorded", _quiet)
     prepared = prepare(settings, _quiet)
     return as_recorded, prepared, fit_with_starts(prepared.make_model, (), prepared.samples, prepared.split.train)
 
@@ -286,8 +298,14 @@ def _added(
     strength = next(iter(VOCABULARY[term].PARAMS))
     peak = write_injected(prepared, term, params, folder / "recordings", base_fit)
     data = replace(settings.data, path=str(folder / "recordings"))
-    outcome = run(replace(settings, data=data), folder / "run", _quiet)
+    outcome = run(replace(_profiling(settings, [term]), data=data), folder / "run", _quiet)
     return _trial(params[strength], params[strength], peak, outcome, term, strength, as_recorded)
+
+
+def _profiling(settings: InjectRunSettings, terms: list[str]) -> InjectRunSettings:
+    """``settings`` whose diagnosis profiles the strength of each of ``terms`` fitted alone (``Diagnosis.alone``):
+    a size not named is said with its interval, not as a bare value."""
+    return replace(settings, diagnosis=replace(settings.diagnosis, profiled=list(terms)))
 
 
 def _append(output_dir: Path, section: list[str]) -> None:
@@ -445,6 +463,7 @@ def _trial(
     entry = next((e for e in diagnosis["left_out"] if e["term"] == term), None)
     if entry is None:
         alone = (outcome.candidates.get(term) or {}).get(strength)
+        alone_interval, alone_misses_data = outcome.alone.get(term), outcome.alone.get(term, []) is None
         why = tuple(note for note in diagnosis["notes"] if term in note)
         rivals = {other for group in diagnosis["confounded"] if term in group["terms"] for other in group["terms"]}
         confounded = tuple(f"{e['term']} ({e['confidence']})" for e in named if e["term"] in rivals)
@@ -463,6 +482,8 @@ def _trial(
             recorded=recorded,
             why=why,
             permeability=permeability,
+            alone_interval=alone_interval,
+            alone_misses_data=alone_misses_data,
         )
     value, interval = entry["params"][strength], entry["param_interval"][strength]
     return Trial(

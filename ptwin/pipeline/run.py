@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -68,6 +68,7 @@ class RunResult:
     # (None: that fit failed); the others were no candidates for this set
     base_permeability: float | None = None  # the diagnosis's base model's K as its fit found it [m²] (diagnosis.json
     # leaves a K without fluid force null; its words need the value)
+    alone: dict = field(default_factory=dict)  # ``Diagnosis.alone``: the profiled terms' strengths' intervals
 
 
 def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = print) -> RunResult:
@@ -114,7 +115,7 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     print_summary(results, payload, progress, diagnosis.permeability)
     progress(f"results in {output_dir} ({results['seconds']:.1f} s)")
     tried = {term: _alone(diagnosis, term) for term in VOCABULARY if any(term in key for key in diagnosis.candidates)}
-    return RunResult(results, payload, figures, tried, diagnosis.permeability["base"])
+    return RunResult(results, payload, figures, tried, diagnosis.permeability["base"], diagnosis.alone)
 
 
 def _alone(diagnosis: Diagnosis, term: str) -> dict[str, float] | None:
