@@ -221,7 +221,7 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
     inject = settings.inject
     strength = next(iter(VOCABULARY[inject.term].PARAMS))
     progress(f"inject: the recordings as they are ({len(inject.sizes) + 1} diagnoses in all)")
-    as_recorded, prepared, base_fit = _as_recorded(settings, output_dir)
+    as_recorded, prepared, base_fit = _as_recorded(settings, output_dir, [inject.term])
     trials = [_trial(0.0, None, 0.0, as_recorded, inject.term, strength)]
     own = native_strength(prepared, inject.term, settings.optim.physics_fit.iterations, base_fit, trials[0])
     progress(f"  as recorded: {trials[0].verdict(own)}; {own.words()}")
@@ -249,7 +249,7 @@ def detection_limits(
     a fifteenth of what it holds). The report of the recordings as they are gets a section with each term's
     smallest size named."""
     progress("inject: the recordings as they are, then every candidate term at growing sizes until named")
-    as_recorded, prepared, base_fit = _as_recorded(settings, output_dir)
+    as_recorded, prepared, base_fit = _as_recorded(settings, output_dir, settings.diagnosis.terms)
     terms = candidate_settings(prepared, settings)[0].terms
     found, native, already = {}, {}, set()
     for i, term in enumerate(terms, start=1):
@@ -276,10 +276,13 @@ def detection_limits(
     return found
 
 
-def _as_recorded(settings: InjectRunSettings, output_dir: Path) -> tuple[RunResult, Prepared, PhysicsFit]:
-    """The recordings as they are: diagnosed as train.py would (its output in ``output_dir/as-recorded``), prepared,
-    and the base model fitted to their training samples (what every term is added on)."""
-    as_recorded = run(_profiling(settings, settings.diagnosis.terms), output_dir / "as-recorded", _quiet)
+def _as_recorded(
+    settings: InjectRunSettings, output_dir: Path, terms: list[str]
+) -> tuple[RunResult, Prepared, PhysicsFit]:
+    """The recordings as they are: diagnosed as train.py would (its output in ``output_dir/as-recorded``), each of
+    ``terms`` fitted alone profiled, prepared, and the base model fitted to their training samples (what every term
+    is added on)."""
+    as_recorded = run(_profiling(settings, terms), output_dir / "as-recorded", _quiet)
     prepared = prepare(settings, _quiet)
     return as_recorded, prepared, fit_with_starts(prepared.make_model, (), prepared.samples, prepared.split.train)
 
