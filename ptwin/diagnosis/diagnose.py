@@ -738,7 +738,7 @@ def _alone_interval(term: str, c: _Context, test: StructureTest) -> list[float |
     candidate = c.candidates[(term,)]
     if candidate.leaves_structure(test):
         return None
-    return parameter_interval(candidate.fit, term, next(iter(VOCABULARY[term].PARAMS)), c.samples, c.split.train)
+    return parameter_interval(candidate.fit, term, VOCABULARY[term].strength(), c.samples, c.split.train)
 
 
 def _parameter_intervals(fit: PhysicsFit, term: str, c: _Context) -> dict[str, list[float | None]]:

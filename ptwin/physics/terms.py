@@ -118,6 +118,12 @@ class Term(nn.Module):
         return cls.force is Term.force and cls.elastic_force is Term.elastic_force
 
     @classmethod
+    def strength(cls) -> str:
+        """The name of its strength, its first parameter (gamma, g, alpha, M, m, b, delta): what
+        ``python -m ptwin.inject`` scales and what a size added or found is read in."""
+        return next(iter(cls.PARAMS))
+
+    @classmethod
     def raw_name(cls, name: str) -> str:
         return f"log_{name}" if cls.PARAMS[name].log else name
 

@@ -219,7 +219,7 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
     """Diagnose the recordings as they are, then with the term added at each size; the report of the first
     gets a section on what these recordings could have shown."""
     inject = settings.inject
-    strength = next(iter(VOCABULARY[inject.term].PARAMS))
+    strength = VOCABULARY[inject.term].strength()
     progress(f"inject: the recordings as they are ({len(inject.sizes) + 1} diagnoses in all)")
     as_recorded, prepared, base_fit = _as_recorded(settings, output_dir, [inject.term])
     trials = [_trial(0.0, None, 0.0, as_recorded, inject.term, strength)]
@@ -253,7 +253,7 @@ def detection_limits(
     terms = candidate_settings(prepared, settings)[0].terms
     found, native, already = {}, {}, set()
     for i, term in enumerate(terms, start=1):
-        strength = next(iter(VOCABULARY[term].PARAMS))
+        strength = VOCABULARY[term].strength()
         recorded = _trial(0.0, None, 0.0, as_recorded, term, strength)
         native[term] = native_strength(prepared, term, settings.optim.physics_fit.iterations, base_fit, recorded)
         found[term] = []
@@ -298,7 +298,7 @@ def _added(
 ) -> Trial:
     """``term`` at ``params`` added to the recordings (written in ``folder/recordings``) and diagnosed as train.py
     would (in ``folder/run``): its ``Trial``, its size the strength added."""
-    strength = next(iter(VOCABULARY[term].PARAMS))
+    strength = VOCABULARY[term].strength()
     peak = write_injected(prepared, term, params, folder / "recordings", base_fit)
     data = replace(settings.data, path=str(folder / "recordings"))
     outcome = run(replace(_profiling(settings, [term]), data=data), folder / "run", _quiet)
@@ -327,7 +327,8 @@ def _ladder(prepared: Prepared, term: str, base_fit: PhysicsFit) -> list[tuple[f
     its physical range: its strength bracketed where the grid of ``_FACTORS`` first crosses the peak, walking from
     weak to strong (a smaller M is a stronger pore relaxation), then found in the bracket (``_crossing``)."""
     cls = VOCABULARY[term]
-    strength, parameter = next(iter(cls.PARAMS.items()))
+    strength = cls.strength()
+    parameter = cls.PARAMS[strength]
 
     def peak(value: float) -> float:
         return judged_peak(prepared, added_force(prepared, term, {**cls.TYPICAL, strength: value}, base_fit))
@@ -392,7 +393,7 @@ def limits_section(found: dict[str, list[Trial]], native: dict[str, Own], alread
         "|---|---|---|---|---|",
     ]
     for term, trials in found.items():
-        strength = next(iter(VOCABULARY[term].PARAMS))
+        strength = VOCABULARY[term].strength()
         if term in already:
             own = native[term]
             lines.append(f"| `{term}` | {ALREADY} ({own.strength} {own.value:.3g}): not added | – | – | – |")
@@ -466,7 +467,8 @@ def _trial(
     entry = next((e for e in diagnosis["left_out"] if e["term"] == term), None)
     if entry is None:
         alone = (outcome.candidates.get(term) or {}).get(strength)
-        alone_interval, alone_misses_data = outcome.alone.get(term), outcome.alone.get(term, []) is None
+        alone_interval = outcome.alone.get(term)  # absent where not profiled, None where its fit leaves structure
+        alone_misses_data = term in outcome.alone and alone_interval is None
         why = tuple(note for note in diagnosis["notes"] if term in note)
         rivals = {other for group in diagnosis["confounded"] if term in group["terms"] for other in group["terms"]}
         confounded = tuple(f"{e['term']} ({e['confidence']})" for e in named if e["term"] in rivals)
@@ -522,7 +524,8 @@ def native_strength(prepared: Prepared, term: str, iterations: int, base_fit: Ph
     size added is then found in that model: on a real creep named with a power law, g 0.148, where alone it fits
     0.251); else fitted alone, from the starts the diagnosis gives it (``base_fit``: the base model fitted to the
     training samples)."""
-    strength, parameter = next(iter(VOCABULARY[term].PARAMS.items()))
+    strength = VOCABULARY[term].strength()
+    parameter = VOCABULARY[term].PARAMS[strength]
     absent = 0.0 if parameter.absent is None else parameter.absent  # a strength no one value removes: read from 0
     if as_recorded.confidence:
         return Own(strength, as_recorded.found, absent)

@@ -272,7 +272,8 @@ def _permeability_against_speed(apparent, base, corrected_per_curve):
 
 def _viscous_per_speed(apparent, fits, term):
     """Stage 2 per curve: the viscous term's parameter and K against speed."""
-    parameter, description = next(iter(VOCABULARY[term].PARAMS.items()))
+    parameter = VOCABULARY[term].strength()
+    description = VOCABULARY[term].PARAMS[parameter]
     speeds = _speeds(apparent, fits)
     figure, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.8))
     fits = list(fits.values())
