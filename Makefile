@@ -16,8 +16,9 @@ $(STAMP): pyproject.toml
 setup: $(STAMP)
 
 test: $(STAMP)
-	# one worker a core, a test file a worker (its module fixtures are built once)
-	$(PY) -m pytest -q -n auto --dist loadfile
+	# one worker a core, a test file a worker (its module fixtures are built once), files in the order
+	# tests/conftest.py collects them (the heaviest first)
+	$(PY) -m pytest -q -n auto --dist loadfile --no-loadscope-reorder
 
 bench: $(STAMP)
 	$(PY) -m bench.train_bench
