@@ -157,6 +157,21 @@ def test_a_strength_fitted_alone_is_said_as_the_data_fix_it():
     assert replace(flat, alone_interval=None).verdict(own) == "not named (g 4.46 fitted alone)"  # not profiled
 
 
+def test_the_recordings_own_strength_a_size_is_read_over_is_said_as_the_data_fix_it():
+    # Bench-set p04 with a solid relaxation added: "named (weak), g 0.0586 (95%: 0.0517 to 0.0666)" beside "a size
+    # found is read over g 0.0651, the recordings' own", a bare value whatever the data made of it.
+    named = Trial(64.0, 0.0643, 64.0, "weak", 0.0586, [0.0517, 0.0666], False, True)
+    closed = Own("g", 0.0651, 0.0, [0.051, 0.079])
+    assert closed.words() == "a size found is read over the recordings' own g 0.0651 (95%: 0.051 to 0.079)"
+    assert named.verdict(closed).endswith("fit g 0.0651 (95%: 0.051 to 0.079): the size found is not read over it")
+    assert Own("g", 4.46, 0.0, [None, None]).words().endswith("own g 4.46, not fixed by these data")
+    below = Own("g", 0.0651, 0.0, [None, 0.3]).fitted()
+    assert below == "g 0.0651, though the data say only g < 0.3 (95%; the data set no lower limit)"
+    structured = Own("g", 0.0651, 0.0, [None, None], misses_data=True).fitted()
+    assert structured.startswith("g 0.0651 (from a model that misses the data")
+    assert Own("g", 0.0651).fitted() == "g 0.0651"  # not profiled
+
+
 def test_a_term_read_as_another_it_cannot_be_told_from_says_so():
     # Real-noise PAAm null (bench-set p03) with g 0.33 of solid_relaxation added: the diagnosis named
     # strain_dependent_permeability (weak) and listed the two as confounded; the verdict read as a wrong answer.
@@ -199,7 +214,7 @@ def test_a_size_found_of_a_term_that_vanishes_as_its_strength_grows_adds_in_its_
         == "a size found is read whole: the recordings' own fit of gamma failed or is not physical"
     )
     assert Own("M", math.inf, math.inf).words().endswith("the recordings' own fit of M failed or is not physical")
-    assert Own("M", 2.05e6, math.inf).words() == "a size found is read over M 2.05e+06, the recordings' own"
+    assert Own("M", 2.05e6, math.inf).words() == "a size found is read over the recordings' own M 2.05e+06"
 
 
 def test_a_term_not_named_comes_with_the_base_model_permeability():
@@ -376,8 +391,14 @@ def test_a_term_the_recordings_name_already_is_not_added_up_the_ladder(tmp_path,
         r"  \[1/1\] solid_viscosity: named in the recordings as they are \(\w+\), gamma .*; not added", lines[1]
     )
     report = (tmp_path / "run" / "as-recorded" / "report.md").read_text()
-    held = re.search(r"`solid_viscosity` \| named in the recordings as they are \(gamma ([0-9.]+)\): not added", report)
+    # what they hold, as the data fix it
+    held = re.search(
+        r"`solid_viscosity` \| named in the recordings as they are \(gamma ([0-9.]+) \(95%: ([0-9.]+) to ([0-9.]+)\)\)"
+        ": not added",
+        report,
+    )
     assert float(held.group(1)) == pytest.approx(5.0, rel=0.05)
+    assert float(held.group(2)) < 5.0 < float(held.group(3))
 
 
 def test_recordings_that_name_as_many_terms_as_are_fitted_together_say_another_needs_more():

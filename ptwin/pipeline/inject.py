@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from ptwin.data.recordings import write_recordings
+from ptwin.diagnosis.diagnose import parameter_interval
 from ptwin.diagnosis.words import bounded, number, permeability_words
 from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, fit_with_starts
@@ -55,6 +56,8 @@ class Own:
     strength: str  # the term's strength parameter (its first)
     value: float  # the strength fitted; ``absent`` where that fit fails or is not physical
     absent: float = 0.0  # the strength at which the term does nothing (``Parameter.absent``)
+    interval: list[float | None] | None = None  # its 95% profile interval (None: not profiled)
+    misses_data: bool = False  # the value is that of a model that leaves structure, which no interval bounds
 
     def beyond(self, found: float) -> float | None:
         """What a strength ``found`` adds to the recordings' own: the difference for a strength that acts from 0;
@@ -75,13 +78,27 @@ class Own:
 
     def below(self) -> str:
         """Where a size found is not beyond the recordings' own (``beyond``), in words."""
-        return f"the recordings as they are fit {self.strength} {self.value:.3g}: the size found is not read over it"
+        return f"the recordings as they are fit {self.fitted()}: the size found is not read over it"
 
     def words(self) -> str:
         """What a size found is read over, in words."""
         if self.value == self.absent:
             return f"a size found is read whole: the recordings' own fit of {self.strength} failed or is not physical"
-        return f"a size found is read over {self.strength} {self.value:.3g}, the recordings' own"
+        return f"a size found is read over the recordings' own {self.fitted()}"
+
+    def fitted(self) -> str:
+        """The strength the recordings fit, as the data fix it: a size found is read over the value, so the value is
+        said, beside its 95% interval, or what the data say of it where they do not close it (bench-set p04 as
+        recorded: "g 0.0651", a bare value the data may not fix)."""
+        value = f"{self.strength} {self.value:.3g}"
+        if self.interval is None:
+            return value
+        said = bounded(self.value, self.interval, ".3g", misses_data=self.misses_data)
+        if self.misses_data or None not in self.interval:
+            return f"{self.strength} {said}"
+        if self.interval == [None, None]:
+            return f"{value}, {said}"
+        return f"{value}, though the data say only {self.strength} {said}"
 
 
 @dataclass
@@ -395,8 +412,7 @@ def limits_section(found: dict[str, list[Trial]], native: dict[str, Own], alread
     for term, trials in found.items():
         strength = VOCABULARY[term].strength()
         if term in already:
-            own = native[term]
-            lines.append(f"| `{term}` | {ALREADY} ({own.strength} {own.value:.3g}): not added | – | – | – |")
+            lines.append(f"| `{term}` | {ALREADY} ({native[term].fitted()}): not added | – | – | – |")
             continue
         if not trials:
             lines.append(f"| `{term}` | {_reach(LADDER[0], strength)}: not added | – | – | – |")
@@ -528,13 +544,17 @@ def native_strength(prepared: Prepared, term: str, iterations: int, base_fit: Ph
     parameter = VOCABULARY[term].PARAMS[strength]
     absent = 0.0 if parameter.absent is None else parameter.absent  # a strength no one value removes: read from 0
     if as_recorded.confidence:
-        return Own(strength, as_recorded.found, absent)
+        return Own(strength, as_recorded.found, absent, list(as_recorded.interval), as_recorded.unexplained)
     samples, train = prepared.samples, prepared.split.train
     try:
         fit = fit_with_starts(prepared.make_model, (term,), samples, train, iterations, base_fit)
     except FitError:
         return Own(strength, absent, absent)
-    return Own(strength, fit.params[term][strength] if fit.physical else absent, absent)
+    if not fit.physical:
+        return Own(strength, absent, absent)
+    # the structure test on the term fitted alone is the diagnosis's (``Trial.alone_misses_data``)
+    interval = parameter_interval(fit, term, strength, samples, train)
+    return Own(strength, fit.params[term][strength], absent, interval, as_recorded.alone_misses_data)
 
 
 def detection_section(term: str, trials: list[Trial], own: Own, listed: list[str]) -> list[str]:
