@@ -21,7 +21,7 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 
 
 # The files that run whole diagnoses, heaviest first (seconds of a worker's time, make test at 69217f9: 96, 41, 39,
-# 38, 34, 23, 21, 19, 18; the other 31 files 4–15 s, 160 s together). make test hands files to its two workers in
+# 38, 34, 23, 21, 19, 18; the other 31 files 0.1–15 s, 160 s together). make test hands files to its two workers in
 # collection order (--no-loadscope-reorder): with these first, the last file a worker takes is a light one. xdist's
 # own order, most tests first, handed out five of them last (one_curve, power_law_diagnosis, realism, train_cli and
 # training have 3–5 tests each).
