@@ -34,8 +34,8 @@ def line_samples(inflation=1.0, n=400):
     return Samples(x, zeros, zeros, zeros, y, flags, flags.long(), ~flags, torch.full_like(x, 0.1), ("c",), inflation)
 
 
-def fitted_line(samples):
-    model = Line()
+def fitted_line(samples, model=None):
+    model = model or Line()
     index = torch.arange(len(samples))
     vector, residual = scaled_residual(model, samples, index)
     theta = LevenbergMarquardt(residual, vector.get()).run(50)
@@ -45,19 +45,61 @@ def fitted_line(samples):
     return fit, index
 
 
+def textbook_std(samples, fit) -> float:
+    """The slope's standard error by least squares (σ 0.1), times the noise inflation and the reduced χ² where
+    that exceeds 1, as the profile reads them."""
+    design = torch.stack([torch.ones_like(samples.time), samples.time], 1)
+    reduced = max(1.0, fit.chi_square / (len(samples) - 2))
+    return 0.1 * math.sqrt(torch.linalg.inv(design.T @ design)[1, 1].item() * samples.noise_inflation * reduced)
+
+
 @pytest.mark.parametrize("inflation", [1.0, 4.0])
 def test_the_profile_of_a_linear_model_is_the_textbook_interval_times_the_noise_inflation(inflation):
     samples = line_samples(inflation)
     fit, index = fitted_line(samples)
-    x = samples.time
-    design = torch.stack([torch.ones_like(x), x], 1)
-    reduced = max(1.0, fit.chi_square / (len(samples) - 2))
-    std = 0.1 * math.sqrt(torch.linalg.inv(design.T @ design)[1, 1].item() * inflation * reduced)
+    std = textbook_std(samples, fit)
     low, high = profile_interval(fit, "b", std, samples, index)
     b = fit.model.b.item()
     half = math.sqrt(LEVEL) * std
     assert low == pytest.approx(b - half, rel=1e-3)
     assert high == pytest.approx(b + half, rel=1e-3)
+
+
+class HeldContact(nn.Module):
+    """A reference contact correction the fit holds (not a free parameter), within ``reach``."""
+
+    def __init__(self, reach: float):
+        super().__init__()
+        self.reach = reach
+        self.reference = nn.Parameter(torch.zeros((), dtype=torch.float64), requires_grad=False)
+
+
+class LineWithContact(Line):
+    """y = a + (b + reference)·x: the held correction trades one for one with the slope, as a contact shift with a
+    term that grows from contact."""
+
+    def __init__(self, reach: float):
+        super().__init__()
+        self.contact = HeldContact(reach)
+
+    def forward(self, samples):
+        return self.a + (self.b + self.contact.reference) * samples.time
+
+
+def test_a_held_contact_correction_is_refitted_in_the_profile_over_its_reach():
+    # The slope's profile is the textbook parabola at each place the correction may be held, moved by it: the
+    # interval is their union, the reach wider on each side than the held place's own: 2.938 to 3.048 here.
+    # Profiled with the correction held where the fit holds it, it was the textbook 2.958 to 3.027.
+    samples = line_samples()
+    fit, index = fitted_line(samples, LineWithContact(reach=0.0))
+    std = textbook_std(samples, fit)
+    half = math.sqrt(LEVEL) * std
+    reach = 0.6 * half  # places a third of it apart: their parabolas' intervals overlap into one
+    fit.model.contact.reach, fit.reference_free = reach, False
+    low, high = profile_interval(fit, "b", std, samples, index)
+    b = fit.model.b.item()
+    assert low == pytest.approx(b - reach - half, rel=1e-3)
+    assert high == pytest.approx(b + reach + half, rel=1e-3)
 
 
 class Saturating(Line):

@@ -17,12 +17,13 @@ place where the arithmetic broke as a bound the data set.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import torch
 
 from ptwin.fitting.lm import FitError, LevenbergMarquardt
-from ptwin.fitting.physics_fit import SETTLED, PhysicsFit, scaled_residual
+from ptwin.fitting.physics_fit import SETTLED, PhysicsFit, held_elsewhere, scaled_residual
 from ptwin.physics.samples import Samples
 
 LEVEL = 3.841458820694124  # the 95% point of χ² with one degree of freedom
@@ -36,39 +37,50 @@ def profile_interval(
 ) -> tuple[float | None, float | None]:
     """The 95% interval of the raw parameter ``raw_name`` (a name among the model's free parameters,
     e.g. 'fluid.log_permeability') on ``samples[index]``, in raw units; ``raw_std`` its Wald std (the
-    first step). None on a side the data do not close."""
+    first step). None on a side the data do not close. Where ``fit`` holds the reference's contact
+    correction, each profile point takes the best of the places it could have been held
+    (``held_elsewhere``): the contact is a nuisance refitted like every other."""
     vector, residual = scaled_residual(fit.model, samples, index)
     theta = vector.get()
     j = vector.names.index(raw_name)
     others = [i for i in range(theta.numel()) if i != j]
-    warm = {"others": theta[others].clone()}
+    starts = [(theta, residual), *held_elsewhere(fit, samples, index)]
     reduced = fit.chi_square / max(fit.samples - theta.numel(), 1)
     scale = samples.noise_inflation * max(1.0, reduced)
 
-    def excess(offset: float) -> float:
-        """√(Δχ²/κ²) − √3.84 with the parameter at θ̂ + offset, the others refitted (warm)."""
-        fixed = theta.clone()
+    def least(offset: float, start: torch.Tensor, residual, warm: dict) -> float:
+        """χ² with the parameter at θ̂ + offset, the others refitted from ``warm`` (or ``start``); inf where the
+        model cannot be fitted there."""
+        fixed = start.clone()
         fixed[j] = theta[j] + offset
 
         def partial(rest):
             return residual(torch.cat([rest[:j], fixed[j : j + 1], rest[j:]]))
 
+        rest = warm.get("others", start[others].clone())
         try:
             if others:
-                solver = LevenbergMarquardt(partial, warm["others"])
-                warm["others"] = solver.run(REFIT, settled=SETTLED)
+                rest = LevenbergMarquardt(partial, rest).run(REFIT, settled=SETTLED)
             with torch.no_grad():
-                chi_square = partial(warm["others"]).square().sum().item()
+                chi_square = partial(rest).square().sum().item()
         except FitError:
             return math.inf
-        delta = max(chi_square - fit.chi_square, 0.0) / scale
-        return math.sqrt(delta) - math.sqrt(LEVEL) if math.isfinite(delta) else math.inf
+        warm["others"] = rest
+        return chi_square if math.isfinite(chi_square) else math.inf
+
+    def excess(warms: list[dict], offset: float) -> float:
+        """√(Δχ²/κ²) − √3.84 with the parameter at θ̂ + offset, the others refitted (warm), the least over
+        ``starts``."""
+        chi_square = min(least(offset, start, r, warm) for (start, r), warm in zip(starts, warms))
+        if not math.isfinite(chi_square):
+            return math.inf
+        return math.sqrt(max(chi_square - fit.chi_square, 0.0) / scale) - math.sqrt(LEVEL)
 
     step = raw_std if math.isfinite(raw_std) and raw_std > 0 else max(abs(theta[j].item()), 1.0) * 0.1
     sides = []
     for sign in (-1.0, 1.0):
-        warm["others"] = theta[others].clone()
-        end = _side(excess, sign * 1.96 * step)
+        warms = [{} for _ in starts]
+        end = _side(functools.partial(excess, warms), sign * 1.96 * step)
         sides.append(None if end is None else theta[j].item() + end)
     return sides[0], sides[1]
 
