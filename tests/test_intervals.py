@@ -86,20 +86,20 @@ class LineWithContact(Line):
         return self.a + (self.b + self.contact.reference) * samples.time
 
 
-def test_a_held_contact_correction_is_refitted_in_the_profile_over_its_reach():
-    # The slope's profile is the textbook parabola at each place the correction may be held, moved by it: the
-    # interval is their union, the reach wider on each side than the held place's own: 2.938 to 3.048 here.
-    # Profiled with the correction held where the fit holds it, it was the textbook 2.958 to 3.027.
+def test_a_held_contact_correction_is_refitted_in_the_profile_within_its_reach():
+    # Refitted within its reach, the correction takes up the slope's change until it reaches either end, and the
+    # textbook parabola starts there: the interval is the textbook one widened by the reach on each side (2.938
+    # to 3.048 here). Profiled with the correction held where the fit holds it, it was the textbook 2.958 to 3.027.
     samples = line_samples()
     fit, index = fitted_line(samples, LineWithContact(reach=0.0))
     std = textbook_std(samples, fit)
-    half = math.sqrt(LEVEL) * std
-    reach = 0.6 * half  # places a third of it apart: their parabolas' intervals overlap into one
+    reach = 0.6 * math.sqrt(LEVEL) * std
     fit.model.contact.reach, fit.reference_free = reach, False
     low, high = profile_interval(fit, "b", std, samples, index)
-    b = fit.model.b.item()
+    b, half = fit.model.b.item(), math.sqrt(LEVEL) * std
     assert low == pytest.approx(b - reach - half, rel=1e-3)
     assert high == pytest.approx(b + reach + half, rel=1e-3)
+    assert fit.model.contact.reference.item() == 0.0  # the model as fitted: the profile only evaluates it
 
 
 class Saturating(Line):

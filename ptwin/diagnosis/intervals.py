@@ -17,13 +17,12 @@ place where the arithmetic broke as a bound the data set.
 
 from __future__ import annotations
 
-import functools
 import math
 
 import torch
 
 from ptwin.fitting.lm import FitError, LevenbergMarquardt
-from ptwin.fitting.physics_fit import SETTLED, PhysicsFit, held_elsewhere, scaled_residual
+from ptwin.fitting.physics_fit import SETTLED, PhysicsFit, held_reach, scaled_residual
 from ptwin.physics.samples import Samples
 
 LEVEL = 3.841458820694124  # the 95% point of χ² with one degree of freedom
@@ -38,49 +37,52 @@ def profile_interval(
     """The 95% interval of the raw parameter ``raw_name`` (a name among the model's free parameters,
     e.g. 'fluid.log_permeability') on ``samples[index]``, in raw units; ``raw_std`` its Wald std (the
     first step). None on a side the data do not close. Where ``fit`` holds the reference's contact
-    correction, each profile point takes the best of the places it could have been held
-    (``held_elsewhere``): the contact is a nuisance refitted like every other."""
-    vector, residual = scaled_residual(fit.model, samples, index)
+    correction, each profile point refits it too, within its reach (``held_reach``): held by choice,
+    it is a nuisance like every other."""
+    reach = held_reach(fit)
+    extra = ("contact.reference",) if reach is not None else ()
+    vector, residual = scaled_residual(fit.model, samples, index, also=extra)
     theta = vector.get()
-    j = vector.names.index(raw_name)
+    j = sum(vector.sizes[: vector.names.index(raw_name)])
+    contact = sum(vector.sizes[: vector.names.index("contact.reference")]) if extra else None
     others = [i for i in range(theta.numel()) if i != j]
-    starts = [(theta, residual), *held_elsewhere(fit, samples, index)]
-    reduced = fit.chi_square / max(fit.samples - theta.numel(), 1)
+    warm = {"others": theta[others].clone()}
+    reduced = fit.chi_square / max(fit.samples - theta.numel() + len(extra), 1)
     scale = samples.noise_inflation * max(1.0, reduced)
 
-    def least(offset: float, start: torch.Tensor, residual, warm: dict) -> float:
-        """χ² with the parameter at θ̂ + offset, the others refitted from ``warm`` (or ``start``); inf where the
-        model cannot be fitted there."""
-        fixed = start.clone()
-        fixed[j] = theta[j] + offset
+    def refitted(fixed: torch.Tensor, free: list[int]) -> torch.Tensor:
+        """``fixed`` with its entries ``free`` refitted (from their values there)."""
+        at = torch.tensor(free, dtype=torch.long)
 
         def partial(rest):
-            return residual(torch.cat([rest[:j], fixed[j : j + 1], rest[j:]]))
+            return residual(fixed.index_put((at,), rest))
 
-        rest = warm.get("others", start[others].clone())
+        rest = LevenbergMarquardt(partial, fixed[at]).run(REFIT, settled=SETTLED) if free else fixed[at]
+        return fixed.index_put((at,), rest)
+
+    def excess(offset: float) -> float:
+        """√(Δχ²/κ²) − √3.84 with the parameter at θ̂ + offset, the others refitted (warm)."""
+        start = theta.clone()
+        start[others] = warm["others"]
+        start[j] = theta[j] + offset
         try:
-            if others:
-                rest = LevenbergMarquardt(partial, rest).run(REFIT, settled=SETTLED)
+            full = refitted(start, others)
+            if contact is not None and abs(full[contact].item()) > reach:  # held at its reach, the rest refitted
+                full[contact] = math.copysign(reach, full[contact].item())
+                full = refitted(full, [i for i in others if i != contact])
+            warm["others"] = full[others]
             with torch.no_grad():
-                chi_square = partial(rest).square().sum().item()
+                chi_square = residual(full).square().sum().item()
         except FitError:
             return math.inf
-        warm["others"] = rest
-        return chi_square if math.isfinite(chi_square) else math.inf
-
-    def excess(warms: list[dict], offset: float) -> float:
-        """√(Δχ²/κ²) − √3.84 with the parameter at θ̂ + offset, the others refitted (warm), the least over
-        ``starts``."""
-        chi_square = min(least(offset, start, r, warm) for (start, r), warm in zip(starts, warms))
-        if not math.isfinite(chi_square):
-            return math.inf
-        return math.sqrt(max(chi_square - fit.chi_square, 0.0) / scale) - math.sqrt(LEVEL)
+        delta = max(chi_square - fit.chi_square, 0.0) / scale
+        return math.sqrt(delta) - math.sqrt(LEVEL) if math.isfinite(delta) else math.inf
 
     step = raw_std if math.isfinite(raw_std) and raw_std > 0 else max(abs(theta[j].item()), 1.0) * 0.1
     sides = []
     for sign in (-1.0, 1.0):
-        warms = [{} for _ in starts]
-        end = _side(functools.partial(excess, warms), sign * 1.96 * step)
+        warm["others"] = theta[others].clone()
+        end = _side(excess, sign * 1.96 * step)
         sides.append(None if end is None else theta[j].item() + end)
     return sides[0], sides[1]
 

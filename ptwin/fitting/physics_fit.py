@@ -91,15 +91,14 @@ class PhysicsFit:
         return self.physical and not self.degenerate
 
 
-def scaled_residual(model, samples: Samples, index: torch.Tensor, held: dict[str, torch.Tensor] | None = None):
-    """θ ↦ (model − measured)/σ on ``index``, θ: the model's parameters that require grad; ``held``: values of
-    parameters it does not fit, in place of the model's ({name: tensor})."""
-    vector = ParameterVector(model, [n for n, p in model.named_parameters() if p.requires_grad])
+def scaled_residual(model, samples: Samples, index: torch.Tensor, also: tuple[str, ...] = ()):
+    """θ ↦ (model − measured)/σ on ``index``, θ: the model's parameters that require grad, then those named in
+    ``also`` (one a fit holds, refitted in a profile)."""
+    vector = ParameterVector(model, [n for n, p in model.named_parameters() if p.requires_grad] + list(also))
     force, noise = samples.force[index], samples.noise_floor[index]
-    held = held or {}
 
     def residual(theta):
-        predicted = evaluated_at(model, {**vector.as_dict(theta), **held}, samples)
+        predicted = evaluated_at(model, vector.as_dict(theta), samples)
         return (predicted[index] - force) / noise
 
     return vector, residual
@@ -387,38 +386,22 @@ def later_contacts(fit: PhysicsFit) -> tuple[float, ...]:
     return tuple(fraction * fit.model.contact.reach for fraction in LATER)
 
 
-def held_elsewhere(fit: PhysicsFit, samples: Samples, index: torch.Tensor) -> list:
-    """``fit``'s scaled residual on ``samples[index]`` (``scaled_residual``) and its θ, with the reference's contact
-    correction held at each other place within its reach [m]: its estimate and ``LATER`` of the reach on either
-    side, every other curve's contact where it was (``ContactNuisance.move_reference``); none where ``fit`` frees
-    it (its intervals carry it as a parameter) or has none.
+def held_reach(fit: PhysicsFit) -> float | None:
+    """How far either side of its estimate [m] ``fit``'s held reference contact correction may be: the reference's
+    onset (``ContactNuisance.reach``), within which a profile refits it (``ptwin.diagnosis.intervals``). None where
+    ``fit`` frees it (it is a parameter of the fit, and its intervals carry it) or has none.
 
-    A correction is held where the data do not fix it within the reference's onset, and the fit then holds it at
-    one place of several. A profile that refits every nuisance takes the best of those places at each point, so
-    an interval carries the contact's uncertainty too. Either side of the estimate: a freed correction is kept
-    wherever its 95% interval reaches within the onset on either side (``_with_reference_contact``), and a fit
-    moves a held one later only because that is where a √w force puts the truth, not because the data rule out
-    the rest. On bench-set p04 (real agarose noise ×15) with γ 11.3 Pa·s added, the viscosity fitted alone held
-    its reference's correction 15 nm after the estimate, γ 6.99; γ's 95% interval was 5.34 to 8.30 with the
-    correction held there, 3.22 to 9.89 over the estimate and the later places, and 3.22 to 12.2 over both sides
-    (the best contact for γ 11.3 is 17 nm before the estimate)."""
-    at = held_at(fit)
-    if at is None or not math.isfinite(fit.model.contact.reach):
-        return []
-    reach = fit.model.contact.reach
-    vector, _ = scaled_residual(fit.model, samples, index)
-    theta = vector.get()
-    # every other curve's contact where it was: their corrections are relative to the reference's
-    offsets = torch.zeros_like(theta)
-    if "contact.offsets" in vector.names:
-        where = vector.names.index("contact.offsets")
-        offsets[sum(vector.sizes[:where]) :][: vector.sizes[where]] = 1.0
-    places = sorted({0.0, *(side * fraction * reach for fraction in LATER for side in (-1.0, 1.0))} - {at})
-    held = [{"contact.reference": torch.tensor(place, dtype=theta.dtype)} for place in places]
-    return [
-        (theta - (place - at) * offsets, scaled_residual(fit.model, samples, index, values)[1])
-        for place, values in zip(places, held)
-    ]
+    A correction is held where the data do not fix it within the onset, at one place (the estimate, or later where
+    χ² falls beyond noise), a choice, not a measurement: a profile that held it there would report the contact as
+    known. Either side of the estimate: a freed correction is kept wherever its 95% interval reaches within the
+    onset on either side (``_with_reference_contact``), and a fit moves a held one later only because that is where
+    a √w force puts the truth, not because the data rule out the rest. On bench-set p06 (real correlated noise,
+    contacts estimated, g 0.2 concealed) the relaxation's g was 0.2016 to 0.2122 with the correction held at the
+    estimate, 0.1997 to 0.2147 refitted; on p04 with γ 11.3 Pa·s added, the viscosity fitted alone held it 15 nm
+    late, γ 6.99 (5.34 to 8.30), 3.16 to 13.0 refitted (the best contact for 11.3 is 17 nm before the estimate)."""
+    if held_at(fit) is None or not math.isfinite(fit.model.contact.reach):
+        return None
+    return fit.model.contact.reach
 
 
 def held_as(model: ForceModel, fit: PhysicsFit) -> ForceModel:
