@@ -1,9 +1,10 @@
 """95% intervals that hold under the noise model: profile likelihood.
 
 For one parameter of a fitted model the profile χ²_p(θ) is the least χ² with θ fixed
-and every other parameter refitted. Under correlated noise the likelihood-ratio
-statistic is Δχ²/κ² (κ²: the noise model's block-variance inflation), also divided by
-the reduced χ² of the fit where that exceeds 1 (the misfit is then larger than the noise
+and every other parameter refitted (a contact correction the fit holds too, within its
+reach: ``held_reach``). Under correlated noise the likelihood-ratio statistic is
+Δχ²/κ² (κ²: the noise model's block-variance inflation), also divided by the reduced χ²
+of the fit where that exceeds 1 (the misfit is then larger than the noise
 model says, as the Wald variance assumes too), and the interval is where it stays
 ≤ 3.84 (χ² with one degree of freedom). Each side is found on the
 raw parameter (log K, log M, log tau: asymmetric intervals where the data are) by

@@ -22,7 +22,9 @@ contact and where its force leaves the baseline for good (``Baseline.onset``). W
 stretch the force is at the baseline's noise and a contact there is a matter of shape;
 beyond it the recording itself says contact or no contact, and a correction that goes
 there is a misfit of the model absorbed (a cantilever drag left out moved it 600 nm into
-a 2.5 µm indentation, where the reference pushes back 80 nN).
+a 2.5 µm indentation, where the reference pushes back 80 nN). Held, it is still no known
+contact: every profile interval refits it within that stretch on either side
+(``ptwin.fitting.physics_fit.held_reach``).
 """
 
 from __future__ import annotations
