@@ -6,6 +6,7 @@ import pytest
 import torch
 from torch import nn
 
+from ptwin.diagnosis.diagnose import _wald
 from ptwin.diagnosis.intervals import LEVEL, profile_interval, within
 from ptwin.diagnosis.words import bounded
 from ptwin.fitting.lm import LevenbergMarquardt
@@ -100,6 +101,17 @@ def test_a_held_contact_correction_is_refitted_in_the_profile_within_its_reach()
     assert low == pytest.approx(b - reach - half, rel=1e-3)
     assert high == pytest.approx(b + reach + half, rel=1e-3)
     assert fit.model.contact.reference.item() == 0.0  # the model as fitted: the profile only evaluates it
+
+
+def test_no_wald_std_is_given_where_the_fit_holds_the_contact_or_the_profile_is_open():
+    # The curvature takes a held correction as known; the interval above refits it (bench-set p06: g ± 0.0027, the
+    # profile 0.1997 to 0.2147 where the curvature says 0.2016 to 0.2122).
+    fit, _ = fitted_line(line_samples(), LineWithContact(reach=1e-3))
+    fit.reference_free = True
+    assert _wald(0.01, [1.0, 2.0], fit) == 0.01
+    assert _wald(0.01, [1.0, None], fit) is None
+    fit.reference_free = False
+    assert _wald(0.01, [1.0, 2.0], fit) is None
 
 
 class Saturating(Line):

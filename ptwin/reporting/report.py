@@ -61,7 +61,7 @@ def print_summary(results: dict, diagnosis: dict, progress=print, fitted: dict |
     corrected = _k((fitted or permeability)["corrected"], permeability["corrected_std"])
     if one_sided((low, high)):  # the bound is all the data say
         corrected = f"< {high:.4g}" if low is None else f"> {low:.4g}"
-    elif permeability["corrected_std"] is None and low is not None:  # rivals widened it: the interval, no std
+    elif permeability["corrected_std"] is None and low is not None:  # rivals or a held contact: the interval, no std
         corrected = f"{number(permeability['corrected'], '.3g')} [{low:.2g}, {high:.2g}]"
     rows.append(("diagnosis: corrected", corrected, _nano(fit["val_rmse"]), _nano(fit["test_rmse"])))
     width = max(24, *(len(row[1]) for row in rows))
