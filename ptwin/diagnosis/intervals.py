@@ -44,8 +44,8 @@ def profile_interval(
     extra = ("contact.reference",) if reach is not None else ()
     vector, residual = scaled_residual(fit.model, samples, index, also=extra)
     theta = vector.get()
-    j = sum(vector.sizes[: vector.names.index(raw_name)])
-    contact = sum(vector.sizes[: vector.names.index("contact.reference")]) if extra else None
+    j = vector.entry(raw_name)
+    contact = vector.entry("contact.reference") if extra else None
     others = [i for i in range(theta.numel()) if i != j]
     warm = {"others": theta[others].clone()}
     reduced = fit.chi_square / max(fit.samples - theta.numel() + len(extra), 1)

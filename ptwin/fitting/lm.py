@@ -82,6 +82,10 @@ class ParameterVector:
         params = dict(self.module.named_parameters())
         return torch.cat([params[n].detach().reshape(-1) for n in self.names])
 
+    def entry(self, name: str) -> int:
+        """Where parameter ``name``'s first value sits in θ."""
+        return sum(self.sizes[: self.names.index(name)])
+
     def as_dict(self, theta: torch.Tensor) -> dict[str, torch.Tensor]:
         return {n: v.reshape(s) for n, v, s in zip(self.names, theta.split(self.sizes), self.shapes)}
 

@@ -234,8 +234,7 @@ def _with_reference_contact(
         freed = _least_squares(model, samples, index, iterations, tolerance)
         linear = freed[1].linearised()
         variance = covariance(*linear) * samples.noise_inflation
-        names, sizes = freed[0].names, freed[0].sizes
-        where = sum(sizes[: names.index("contact.reference")])  # its entry of θ (a set of one curve: no offsets)
+        where = freed[0].entry("contact.reference")
         std = max(variance[where, where].item(), 0.0) ** 0.5
     except FitError:
         freed, std = None, math.inf
