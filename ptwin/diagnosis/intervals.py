@@ -47,7 +47,7 @@ def profile_interval(
     j = vector.entry(raw_name)
     contact = vector.entry("contact.reference") if extra else None
     others = [i for i in range(theta.numel()) if i != j]
-    warm = {"others": theta[others].clone()}
+    warm: dict[str, torch.Tensor] = {}  # the others at the last profile point, each side starting from θ̂
     reduced = fit.chi_square / max(fit.samples - theta.numel() + len(extra), 1)
     scale = samples.noise_inflation * max(1.0, reduced)
 
