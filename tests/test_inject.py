@@ -4,6 +4,7 @@ found with its size; and on data ptwin did not write (a shared development set w
 import json
 import math
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -143,7 +144,6 @@ def test_other_terms_the_recordings_name_as_they_are_are_said_to_be_theirs():
 def test_a_strength_fitted_alone_is_said_as_the_data_fix_it():
     # Bench-set p03 (real PAAm noise) with a solid relaxation of 32× the noise added (g 0.164): "not named (g 4.46
     # fitted alone)", the value a flat profile left the fit at. Profiled (``Diagnosis.alone``), it is said as a bound.
-    from dataclasses import replace
 
     flat = Trial(32.0, 0.164, 32.0, "", None, [None, None], False, True, 4.46, alone_interval=[None, None])
     own = Own("g", 0.0806)
@@ -186,6 +186,14 @@ def test_a_term_read_as_another_it_cannot_be_told_from_says_so():
     assert partly.verdict(Own("g", 0.0)).endswith(
         "the diagnosis named pore_pressure_relaxation (strong) + strain_dependent_permeability (weak); "
         "strain_dependent_permeability (weak) in its place: these recordings cannot tell the two apart"
+    )
+    # Real PAAm (`PAA_speed {5,10,15}_4nN`) with 5 Pa·s added: the rival was named as recorded too, so it was not read
+    # in the term's place; it read "…(weak), as in the recordings as they are in its place: …".
+    before = replace(missed, recorded=("strain_dependent_permeability",))
+    assert before.verdict(Own("g", 0.0)).endswith(
+        "the diagnosis named strain_dependent_permeability (weak), as in the recordings as they are; "
+        "strain_dependent_permeability (weak) explains the data as well as the term added: "
+        "these recordings cannot tell the two apart"
     )
 
 

@@ -135,9 +135,14 @@ class Trial:
         if not self.confidence:
             others = f"; the diagnosis named {' + '.join(self.others)}{self._as_recorded()}" if self.others else ""
             if self.confounded:
-                which = "" if self.confounded == self.others else f"; {' + '.join(self.confounded)}"
-                pair = "the two" if len(self.confounded) == 1 else "them"
-                others += f"{which} in its place: these recordings cannot tell {pair} apart"
+                rivals, pair = " + ".join(self.confounded), "the two" if len(self.confounded) == 1 else "them"
+                if all(rival.split(" (")[0] in self.recorded for rival in self.confounded):
+                    # named as recorded too: not read in the term's place, yet no worse an account of the data
+                    explain = "explains" if len(self.confounded) == 1 else "explain"
+                    others += f"; {rivals} {explain} the data as well as the term added"
+                else:
+                    others += f"{'' if self.confounded == self.others else f'; {rivals}'} in its place"
+                others += f": these recordings cannot tell {pair} apart"
             said = "unexplained" if self.unexplained else "not named"
             if not self.candidate:
                 fitted = "no candidate in these recordings"
