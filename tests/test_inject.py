@@ -144,7 +144,6 @@ def test_other_terms_the_recordings_name_as_they_are_are_said_to_be_theirs():
 def test_a_strength_fitted_alone_is_said_as_the_data_fix_it():
     # Bench-set p03 (real PAAm noise) with a solid relaxation of 32× the noise added (g 0.164): "not named (g 4.46
     # fitted alone)", the value a flat profile left the fit at. Profiled (``Diagnosis.alone``), it is said as a bound.
-
     flat = Trial(32.0, 0.164, 32.0, "", None, [None, None], False, True, 4.46, alone_interval=[None, None])
     own = Own("g", 0.0806)
     assert flat.verdict(own) == "not named (g fitted alone: not fixed by these data)"

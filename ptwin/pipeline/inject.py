@@ -141,7 +141,8 @@ class Trial:
                     explain = "explains" if len(self.confounded) == 1 else "explain"
                     others += f"; {rivals} {explain} the data as well as the term added"
                 else:
-                    others += f"{'' if self.confounded == self.others else f'; {rivals}'} in its place"
+                    which = "" if self.confounded == self.others else f"; {rivals}"
+                    others += f"{which} in its place"
                 others += f": these recordings cannot tell {pair} apart"
             said = "unexplained" if self.unexplained else "not named"
             if not self.candidate:
