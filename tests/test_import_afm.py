@@ -125,6 +125,36 @@ def test_a_file_lacking_its_calibration_says_which_options_to_pass(tmp_path, cap
     assert "--sensitivity" in error and "--spring-constant" in error
 
 
+def test_a_file_without_a_spring_constant_says_to_pass_it(tmp_path, monkeypatch, capsys):
+    # AFM Workshop's CSV holds force in newtons and no spring constant: afmformats' metadata raised a traceback.
+    import afmformats
+
+    curve = StressRelaxation()
+    del curve.metadata["spring constant"]
+    monkeypatch.setattr(afmformats, "load_data", lambda path, meta_override=None: [curve])
+    with pytest.raises(SystemExit) as stop:
+        main(["single.csv", "--out", str(tmp_path / "set"), *COMMON])
+    assert stop.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert error == "single.csv: the file gives no spring constant; pass --spring-constant in N/m"
+    assert not (tmp_path / "set").exists()
+
+
+def test_a_force_map_file_imported_as_one_curve_is_refused_saying_use_map(tmp_path, monkeypatch, capsys):
+    # Its first curve alone was written, the others silently dropped.
+    import afmformats
+
+    spots = [MapCurve(StressRelaxation(), column, 0, 10e-6) for column in range(2)]
+    monkeypatch.setattr(afmformats, "load_data", lambda path, meta_override=None: spots)
+    with pytest.raises(SystemExit) as stop:
+        main(["map.jpk-force-map", "--out", str(tmp_path / "set"), *COMMON])
+    assert stop.value.code == 2
+    assert capsys.readouterr().err.strip() == (
+        "map.jpk-force-map: 2 curves in one file; import it with --map (a recording set per spot)"
+    )
+    assert not (tmp_path / "set").exists()
+
+
 def test_a_file_afmformats_does_not_read_is_refused_in_one_line(tmp_path, capsys):
     # afmformats' errors are BaseExceptions: FileFormatNotSupportedError escaped as a traceback.
     (tmp_path / "notes.txt").write_text("not a force curve\n")

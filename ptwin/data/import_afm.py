@@ -73,8 +73,14 @@ def load_datasets(path: Path, overrides: dict) -> list:
 
 
 def curve_file(path: Path, speed: float | None, overrides: dict) -> tuple[pd.DataFrame, float, float, str]:
-    """``curve_rows`` of the curve in file ``path``."""
-    return curve_rows(load_datasets(path, overrides)[0], str(path), speed)
+    """``curve_rows`` of the curve in file ``path``; a file of several curves (a force map) is refused, never
+    read for its first alone."""
+    datasets = load_datasets(path, overrides)
+    if len(datasets) > 1:
+        mapped = all("grid index x" in data.metadata for data in datasets)
+        fix = "import it with --map (a recording set per spot)" if mapped else "export its curves to files of one each"
+        raise RecordingError(f"{path}: {len(datasets)} curves in one file; {fix}")
+    return curve_rows(datasets[0], str(path), speed)
 
 
 def curve_rows(data, label: str, speed: float | None) -> tuple[pd.DataFrame, float, float, str]:
@@ -93,6 +99,8 @@ def curve_rows(data, label: str, speed: float | None) -> tuple[pd.DataFrame, flo
     base_speed = speed or (md["speed approach"] if "speed approach" in md else None)
     if not base_speed:
         raise RecordingError(f"{label}: the file gives no approach speed; pass --speed in m/s")
+    if "spring constant" not in md:  # a file whose force column needs none (AFM Workshop's CSV) may lack it
+        raise RecordingError(f"{label}: the file gives no spring constant; pass --spring-constant in N/m")
     spring_constant = float(md["spring constant"])
     height = np.asarray(data[HEIGHT if HEIGHT in data.columns else "height (piezo)"], dtype=np.float64)
     force = np.asarray(data["force"], dtype=np.float64)
