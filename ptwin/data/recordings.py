@@ -249,7 +249,7 @@ def _check_curve(file: Path, rows: pd.DataFrame, start: int, meta: Meta) -> None
         row = start + int(depth.argmax())
         raise RecordingError(
             f"{file}: row {row + 2}, curve {curve!r}: depth {depth.max():.3g} m exceeds the probe radius "
-            f"{meta.probe_radius:.3g} m; check z, force and the spring constant in meta.yaml"
+            f"{meta.probe_radius:.3g} m; check probe_radius in meta.yaml (and z, force, spring constant)"
         )
 
 
