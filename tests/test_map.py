@@ -201,6 +201,29 @@ def test_spots_left_without_fluid_force_are_counted_apart_from_k_s_spread():
     )
 
 
+def test_spots_refused_for_one_reason_share_one_line_of_the_report(tmp_path):
+    # A map recorded at one speed gave one identical line per spot (4096 on a 64×64 map), each behind its path.
+    from ptwin.diagnosis.spatial import summarise_map
+    from ptwin.reporting.maps import write_map_outputs
+
+    one_speed = "every curve is at 2 µm/s; one speed cannot separate the elastic law from K"
+    spots = [f"spot_000_{i:03d}" for i in range(14)] + ["spot_001_000"]
+    status = [f"/data/map/{spot}: {one_speed}" for spot in spots[:-1]] + ["/data/map/spot_001_000/meta.yaml: broken"]
+    table = pd.DataFrame({"spot": spots, "x": np.nan, "y": np.nan, "status": status})
+    for column in ("permeability", "effective_modulus"):
+        table[column] = np.nan
+    table[["left_out", "confidence"]], table["unexplained"] = "", False
+    summary = summarise_map(table)
+    assert summary["sentences"][0] == (
+        f"15 of 15 spots could not be diagnosed (14 of them: {one_speed}); spots.csv gives each one's reason."
+    )
+    write_map_outputs(tmp_path, table, summary, figures=True)
+    report = (tmp_path / "report.md").read_text()
+    assert f"| {one_speed} | spot_000_000, " in report and "spot_000_011, and 2 more (14) |" in report
+    assert "| /data/map/spot_001_000/meta.yaml: broken | spot_001_000 (1) |" in report
+    assert "No maps drawn: no spot was diagnosed." in report and not list(tmp_path.glob("*.png"))
+
+
 def test_a_spot_result_of_another_format_is_run_again(tmp_path):
     # Spot results of ptwin-spot/1 gave a K without fluid force as a value; a map resumed over them would mix both.
     from ptwin.pipeline.forcemap import FORMAT, _stored_row
@@ -268,7 +291,8 @@ def test_anything_unforeseen_at_a_spot_is_its_row_and_its_traceback_comes_back(
     assert status == "unexpected ZeroDivisionError (a bug); see spots/only.json: please report it"
     stored = json.loads((tmp_path / "out" / "spots" / "only.json").read_text())
     assert "ZeroDivisionError: a bug" in stored["traceback"]
-    assert (tmp_path / "out" / "report.md").read_text().count("unexpected ZeroDivisionError") == 1
+    report = (tmp_path / "out" / "report.md").read_text()
+    assert f"| {status} | only (1) |" in report and "Traceback" not in report
 
 
 def test_a_map_of_stress_relaxations_is_diagnosed_spot_by_spot(tmp_path, coarse_cache):

@@ -53,6 +53,17 @@ def regions(named: np.ndarray, column: np.ndarray, row: np.ndarray) -> list[np.n
     return sorted(groups, key=len, reverse=True)
 
 
+def failure_reasons(table: pd.DataFrame) -> dict[str, list[str]]:
+    """Why spots could not be diagnosed: {reason: its spots}, the most frequent first. A reason is a spot's
+    status without the spot's own path before it, so that spots refused for one cause (a map recorded at one
+    speed) share one reason instead of a line each."""
+    reasons: dict[str, list[str]] = {}
+    for spot, status in zip(table["spot"], table["status"]):
+        if status != "ok":
+            reasons.setdefault(status.split(f"{spot}: ", 1)[-1], []).append(spot)
+    return dict(sorted(reasons.items(), key=lambda item: -len(item[1])))
+
+
 def summarise_map(table: pd.DataFrame) -> dict:
     """``map_summary.json``: the spots' verdicts counted, K and E* over the diagnosed spots (median and the
     spread between the 16th and 84th percentiles; K over the spots that have one), and for each named term where
@@ -68,9 +79,14 @@ def summarise_map(table: pd.DataFrame) -> dict:
         "terms": {},
         "sentences": [],
     }
-    if len(ok) < len(table):
+    reasons = failure_reasons(table)
+    if reasons:
+        reason, spots = next(iter(reasons.items()))
+        failed = len(table) - len(ok)
+        which = "every one" if len(spots) == failed else f"{len(spots)} of them"
         summary["sentences"].append(
-            f"{len(table) - len(ok)} of {len(table)} spots could not be diagnosed; spots.csv gives each one's reason."
+            f"{failed} of {len(table)} spots could not be diagnosed ({which}: {reason.rstrip('.')}); spots.csv "
+            "gives each one's reason."
         )
     without = int(ok["permeability"].isna().sum())
     if without:

@@ -14,18 +14,19 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from ptwin.diagnosis.spatial import FAILED, grid, verdict  # noqa: E402
+from ptwin.diagnosis.spatial import FAILED, failure_reasons, grid, verdict  # noqa: E402
 from ptwin.reporting.figures import tight  # noqa: E402
 
 MICRO = 1e6
 NOT_DIAGNOSED = "spot not diagnosed"
+LISTED = 12  # spots named in a line of the report; spots.csv has every one
 
 
 def write_map_outputs(output_dir: Path, table: pd.DataFrame, summary: dict, figures: bool) -> None:
     """Everything a map run leaves beside its per-spot results; ``figures``: the maps as PNG too."""
     table.to_csv(output_dir / "spots.csv", index=False, float_format="%.9g")
     (output_dir / "map_summary.json").write_text(json.dumps(summary, indent=2))
-    drawn = _maps(table) if figures else {}
+    drawn = _maps(table) if figures and summary["diagnosed"] else {}  # no spot diagnosed: blank maps say nothing
     for name, figure in drawn.items():
         figure.savefig(output_dir / f"{name}.png", dpi=110)
         plt.close(figure)
@@ -118,9 +119,16 @@ def _report(table: pd.DataFrame, summary: dict, figures: list[str]) -> str:
     lines += ["## Verdicts", "", "| verdict | spots |", "|---|---|"]
     lines += [f"| {name} | {count} |" for name, count in summary["verdicts"].items()]
     lines += ["", *summary["sentences"], ""]
-    lines += [f"![{name}]({name}.png)" for name in figures] or ["No maps drawn (`figures=false`)."]
-    failed = table[table["status"] != "ok"]
-    if len(failed):
-        lines += ["", "## Spots not diagnosed", "", "| spot | why |", "|---|---|"]
-        lines += [f"| {row.spot} | {row.status} |" for row in failed.itertuples()]
+    blank = "No maps drawn: no spot was diagnosed." if not summary["diagnosed"] else "No maps drawn (`figures=false`)."
+    lines += [f"![{name}]({name}.png)" for name in figures] or [blank]
+    reasons = failure_reasons(table)
+    if reasons:
+        lines += ["", "## Spots not diagnosed", "", "| why | spots |", "|---|---|"]
+        lines += [f"| {reason.replace('|', '/')} | {_listed(spots)} |" for reason, spots in reasons.items()]
     return "\n".join(lines) + "\n"
+
+
+def _listed(spots: list[str]) -> str:
+    """The spots, the first ``LISTED`` by name, with their count."""
+    more = f", and {len(spots) - LISTED} more" if len(spots) > LISTED else ""
+    return f"{', '.join(spots[:LISTED])}{more} ({len(spots)})"
