@@ -4,7 +4,7 @@ against the dense transpose, its derivatives against finite differences to secon
 import pytest
 import torch
 
-from ptwin.physics.hereditary import _Substitution, hereditary_inverse
+from ptwin.physics.hereditary import _Geometry, _Substitution, hereditary_inverse
 from ptwin.physics.recurrence import relaxation_integral
 
 
@@ -44,7 +44,7 @@ def test_the_adjoint_solve_is_the_dense_transposes(block):
     time, _, times, weights, extra = irregular_curve(40, 3, 1)
     operator = torch.stack([hereditary_operator(e, extra, weights, times, time) for e in torch.eye(40).double()], 1)
     cotangent = torch.randn(40, dtype=torch.float64, generator=torch.Generator().manual_seed(2))
-    blocks = _Substitution(extra, weights, times, time, block)
+    blocks = _Substitution(extra, weights, _Geometry(times, time, block))
     expected = torch.linalg.solve(operator.T, cotangent)
     torch.testing.assert_close(blocks.solve_transposed(cotangent), expected, rtol=1e-10, atol=1e-12)
     torch.testing.assert_close(blocks.solve(cotangent), torch.linalg.solve(operator, cotangent), rtol=1e-10, atol=0)
@@ -63,3 +63,28 @@ def test_derivatives_in_every_input_first_and_second_order(block):
 
     assert torch.autograd.gradcheck(inverse, inputs)
     assert torch.autograd.gradgradcheck(inverse, inputs)
+    # Modes whose times are held (a power law's): their decays come from the kept geometry, no slope in them.
+    held = times.detach()
+    assert torch.autograd.gradgradcheck(lambda *x: inverse(*x, held), inputs[:3])
+
+
+def test_a_kept_geometry_is_reused_only_while_its_times_are_the_same():
+    """A fit solves on the same samples at every step; a power law's modes keep their times, a relaxation's move.
+    What is kept must never answer for other times: each solve equals a fresh one."""
+    from ptwin.physics.hereditary import KeptGeometry
+
+    time, force, times, weights, extra = irregular_curve(60, 3, 4)
+    kept = KeptGeometry()
+
+    def solved(times, weights):
+        target = hereditary_operator(force, extra, weights, times, time)
+        recovered = hereditary_inverse(target, extra, weights, times, time, kept=kept)
+        torch.testing.assert_close(recovered, force, rtol=1e-10, atol=1e-12)
+        return kept.geometry(times, time, max(1000 // times.numel(), 25))
+
+    first = solved(times, weights)
+    assert solved(times.clone(), 2 * weights) is first  # new weights, equal times: the same geometry
+    assert solved(times * 1.5, weights) is not first  # times that moved: built again
+    moved = solved(times, weights)
+    time *= 1.5  # written in place: the samples are not what it was built on
+    assert solved(times, weights) is not moved

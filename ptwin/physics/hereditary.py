@@ -8,6 +8,8 @@ so a Jacobian walks a few substitutions and a small graph, not the graph of ever
 
 from __future__ import annotations
 
+import functools
+
 import torch
 
 from ptwin.physics.node import Node
@@ -23,6 +25,7 @@ def hereditary_inverse(
     times: torch.Tensor,
     time: torch.Tensor,
     block: int | None = None,
+    kept: KeptGeometry | None = None,
 ) -> torch.Tensor:
     """F on one curve's samples [N] with A·F = F + extra·(F − F₀) + Σ_m weights_m·q_m = target, q_m the relaxation
     integral of F with τ_m = ``times`` (M,) [s] from the first sample (``relaxation_integral``).
@@ -31,11 +34,56 @@ def hereditary_inverse(
     ``block`` samples at a time (default: ``BLOCK_WORK`` / modes, at least 25), a dense lower-triangular
     system in the increments of F, the modes carried from block to block — where a fixed point
     F ← target − Σ(…) diverges once the memory outweighs F (g > 1, or a power law's weight on the last step).
-    Differentiable in ``target``, ``extra``, ``weights`` and ``times``, to any order."""
+    Differentiable in ``target``, ``extra``, ``weights`` and ``times``, to any order. ``kept``: where the caller
+    solves again and again on the same samples, the geometry of the last solve, reused while its times are."""
     if block is None:  # a block's work grows as block² × modes and the loop's cost as samples / block
         block = max(BLOCK_WORK // max(times.numel(), 1), 25)
-    blocks = _Substitution(extra.detach(), weights.detach(), times.detach(), time, block)
+    geometry = _Geometry(times.detach(), time, block) if kept is None else kept.geometry(times.detach(), time, block)
+    blocks = _Substitution(extra.detach(), weights.detach(), geometry)
     return _HereditarySolve.apply(target, extra, weights, times, time, blocks, False)
+
+
+class _Geometry:
+    """What A owes to the sample times and the modes' times alone, not to the weights: each block's decays
+    across its samples and the kernel of its steps, and each mode's decay over each step (``decays``, what
+    ``_operator_slopes`` differentiates). A power law's modes keep their times at every step of a fit (α moves
+    their weights only): built once a fit, not once an evaluation, it took a fifth of a power-law fit's time."""
+
+    def __init__(self, times: torch.Tensor, time: torch.Tensor, block: int):
+        self.times, self.time, self.block, self.blocks = times, time, block, []
+        for begin in range(1, time.numel(), block):
+            end = min(begin + block, time.numel())
+            since = time[begin:end, None] - time[None, begin - 1 : end]  # (B, B + 1): t_i − t_k, k from begin − 1
+            decay = torch.exp(-since.clamp(min=0)[..., None] / times)  # (B, B + 1, M)
+            kernel = decay[:, 1:] * step_mean(torch.diff(time[begin - 1 : end])[:, None] / times)
+            # from the sample before the block to each of its samples, across the block, and from each to its last
+            self.blocks.append((begin, end, decay[:, 0], decay[-1, 0], kernel[-1], kernel))
+
+    @functools.cached_property
+    def decayed(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(M, N): a = exp(−Δt/τ) and the step's mean of exp(−s/τ); asked for where the times need no gradient."""
+        start = torch.arange(self.time.numel(), device=self.time.device) == 0
+        return decays(self.time, start, self.times[:, None])
+
+
+class KeptGeometry:
+    """The last ``_Geometry`` built, given again while the sample times are the same tensor, unwritten, and
+    the modes' times equal."""
+
+    def __init__(self):
+        self._last: tuple[int, _Geometry] | None = None
+
+    def geometry(self, times: torch.Tensor, time: torch.Tensor, block: int) -> _Geometry:
+        last = self._last
+        if not (
+            last is not None
+            and last[1].time is time
+            and last[0] == time._version
+            and last[1].block == block
+            and torch.equal(last[1].times, times)
+        ):
+            last = self._last = (time._version, _Geometry(times, time, block))
+        return last[1]
 
 
 class _Substitution:
@@ -45,18 +93,14 @@ class _Substitution:
     Written in the increments ΔF_k = F_k − F_{k−1}, A·F = F₀ + T·ΔF on each sample after the first, T lower
     triangular with T[i, k] = 1 + extra + Σ_m w_m exp(−(t_i − t_k)/τ_m) mean_{k,m}, mean_{k,m} the mean of
     exp(−s/τ_m) over step k. Each block holds its diagonal piece of T and the decays that carry the modes
-    across its edges."""
+    across its edges (``_Geometry``)."""
 
-    def __init__(self, extra: torch.Tensor, weights: torch.Tensor, times: torch.Tensor, time: torch.Tensor, block: int):
-        self.extra, self.weights, self.blocks = extra, weights, []
-        for begin in range(1, time.numel(), block):
-            end = min(begin + block, time.numel())
-            since = time[begin:end, None] - time[None, begin - 1 : end]  # (B, B + 1): t_i − t_k, k from begin − 1
-            decay = torch.exp(-since.clamp(min=0)[..., None] / times)  # (B, B + 1, M)
-            kernel = decay[:, 1:] * step_mean(torch.diff(time[begin - 1 : end])[:, None] / times)
-            system = (kernel @ weights + (1 + extra)).tril()
-            # from the sample before the block to each of its samples, across the block, and from each to its last
-            self.blocks.append((begin, end, decay[:, 0], decay[-1, 0], kernel[-1], system))
+    def __init__(self, extra: torch.Tensor, weights: torch.Tensor, geometry: _Geometry):
+        self.extra, self.weights, self.geometry = extra, weights, geometry
+        self.blocks = [
+            (begin, end, entering, across, leaving, (kernel @ weights + (1 + extra)).tril())
+            for begin, end, entering, across, leaving, kernel in geometry.blocks
+        ]
 
     def solve(self, target: torch.Tensor) -> torch.Tensor:
         """F = A⁻¹·target, the blocks in turn; the modes Σ_k exp(−(t − t_k)/τ_m) mean_{k,m} ΔF_k carried."""
@@ -107,23 +151,35 @@ class _HereditarySolve(Node):
         if not any(ctx.needs_input_grad[1:4]):
             return dual, None, None, None, None, None, None
         left, right = (solution, dual) if ctx.transposed else (dual, solution)
-        found = (-g for g in _operator_slopes(left, right, weights, times, time))
-        return dual, *(g if need else None for g, need in zip(found, ctx.needs_input_grad[1:4])), None, None, None
+        needs = ctx.needs_input_grad[1:4]
+        slopes = _operator_slopes(left, right, weights, times, time, ctx.blocks.geometry, needs[2])
+        return dual, *(-g if need else None for g, need in zip(slopes, needs)), None, None, None
 
 
 def _operator_slopes(
-    left: torch.Tensor, right: torch.Tensor, weights: torch.Tensor, times: torch.Tensor, time: torch.Tensor
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """∂⟨left, A·right⟩/∂(extra, weights, times), left and right held, in closed form.
+    left: torch.Tensor,
+    right: torch.Tensor,
+    weights: torch.Tensor,
+    times: torch.Tensor,
+    time: torch.Tensor,
+    geometry: _Geometry,
+    to_times: bool,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+    """∂⟨left, A·right⟩/∂(extra, weights, times), left and right held, in closed form; the last only where
+    ``to_times`` (a power law's modes keep their times: nothing asks for it).
 
     Plain torch ops and the recurrence's node, so the result differentiates again in all five; an autograd call
-    here would also run on through the nodes that made ``left`` and ``right`` (this one among them)."""
+    here would also run on through the nodes that made ``left`` and ``right`` (this one among them). The modes'
+    decays are the geometry's where nothing differentiates them (their times need no gradient)."""
     start = torch.arange(time.numel(), device=time.device) == 0
     tau = times[:, None]
-    decayed = decays(time, start, tau)  # (M, N): a = exp(−Δt/τ) and the step's mean of exp(−s/τ)
+    decayed = decays(time, start, tau) if times.requires_grad else geometry.decayed
     memory = relaxation_integral(right, tau, time, start, decayed)  # q_m of right
+    extra_slope, weights_slope = torch.dot(left, right - right[0]), memory @ left
+    if not to_times:
+        return extra_slope, weights_slope, None
     to_decay, to_forcing = recurrence_pullback(decayed[0], memory, left.expand_as(memory))
     decay_slope, mean_slope = decay_slopes(time, start, tau, decayed)
     increment = torch.diff(right, prepend=right[:1])  # the forcing is increment × mean (0 at the start)
     times_slope = weights * (to_decay * decay_slope + to_forcing * increment * mean_slope).sum(-1)
-    return torch.dot(left, right - right[0]), memory @ left, times_slope
+    return extra_slope, weights_slope, times_slope

@@ -11,7 +11,7 @@ from torch import nn
 from ptwin.physics.contact import ContactNuisance
 from ptwin.physics.elastic import ReferenceCurve
 from ptwin.physics.fluid_force import FluidForce, FluidInputError
-from ptwin.physics.hereditary import hereditary_inverse
+from ptwin.physics.hereditary import KeptGeometry, hereditary_inverse
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
 
@@ -85,6 +85,7 @@ class ForceModel(nn.Module):
         self.terms = nn.ModuleDict({n: VOCABULARY[n](probe_radius, **values.get(n, {})) for n in terms})
         self.self_consistent = self_consistent
         self.contact = contact
+        self._hereditary = KeptGeometry()  # the elastic law's operator at the reference's nodes, step to step
 
     def depth(self, samples: Samples) -> torch.Tensor:
         """The samples' depth [m], their curve's contact correction applied (estimated contacts)."""
@@ -157,7 +158,7 @@ class ForceModel(nn.Module):
             return unrelaxed
         # F_el + Σ hereditary(F_el) = unrelaxed on the reference's time history, solved exactly.
         extra, weights, times = (torch.cat([torch.atleast_1d(m[i]) for m in hereditary]) for i in range(3))
-        return hereditary_inverse(unrelaxed, extra.sum(), weights, times, at.time)
+        return hereditary_inverse(unrelaxed, extra.sum(), weights, times, at.time, kept=self._hereditary)
 
     def elastic(self, depth: torch.Tensor, permeability: torch.Tensor | None = None) -> torch.Tensor:
         """F_el(depth) [N]; ``permeability``: None (the model's K) or one K [m²] per depth."""
