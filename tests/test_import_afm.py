@@ -12,10 +12,12 @@ from ptwin.pipeline.prepare import UnsupportedSet
 from tests.conftest import run
 
 AFM = Path(__file__).resolve().parents[2] / "shared" / "data" / "afm"
-pytestmark = pytest.mark.skipif(not AFM.is_dir(), reason=f"vendor recordings not found at {AFM}")
+# Only the tests that read those files skip without them: the others build afmformats' datasets themselves.
+vendor = pytest.mark.skipif(not AFM.is_dir(), reason=f"vendor recordings not found at {AFM}")
 COMMON = ["--probe-radius", "2.0e-5", "--viscosity", "1.0e-3", "--thickness", "1.0e-3"]
 
 
+@vendor
 @pytest.mark.parametrize(
     ("name", "extra", "speed"),
     [
@@ -40,6 +42,7 @@ def test_vendor_file_becomes_a_valid_recording_set(tmp_path, name, extra, speed)
     assert z[0] < 0 < z[-1]  # the estimated contact lies inside the approach
 
 
+@vendor
 def test_the_creep_compliance_file_reads_its_creep_at_constant_force(tmp_path, capsys):
     main([str(AFM / "fmt-jpk-cc_pr14-polymergel-2021.06.30.jpk-force"), "--out", str(tmp_path / "set"), *COMMON])
     assert "as v10c (the retract (3000 samples) not written)" in capsys.readouterr().out
@@ -55,6 +58,7 @@ def test_the_creep_compliance_file_reads_its_creep_at_constant_force(tmp_path, c
     assert depth[-100:].mean() - depth[:100].mean() > 0.1e-6  # ... while the tip sinks in
 
 
+@vendor
 def test_the_base_travel_is_the_sensor_measured_height():
     # JPK's strain gauge ("height (measured)") travels speed × duration on the approach; the piezo's
     # "height" travels 54% of it on this file. Depths w = z − F/k_s must come from the sensor.
@@ -114,6 +118,7 @@ def test_a_stress_relaxation_is_read_whole_and_its_pause_is_not_the_approach(tmp
     assert np.ptp(hold["z"]) < 1e-12  # the base stays where the approach left it
 
 
+@vendor
 def test_a_file_lacking_its_calibration_says_which_options_to_pass(tmp_path, capsys):
     # afmformats raises MissingMetaDataError (a BaseException) and logs its traceback: one line, exit 2.
     name = "fmt-ntmdt-txt-fd_2015_01_17_gel4-0,1_mQ_adh_6B_Curve_DFL_Height_51.txt"
@@ -165,6 +170,7 @@ def test_a_file_afmformats_does_not_read_is_refused_in_one_line(tmp_path, capsys
     assert error.count("\n") == 0 and "notes.txt: not a format afmformats reads" in error
 
 
+@vendor
 def test_files_of_different_cantilevers_are_refused(tmp_path, capsys):
     files = [str(AFM / "fmt-jpk-fd_spot3-0192.jpk-force"), str(AFM / "fmt-igor-fd_U3_3_p10004.ibw")]
     with pytest.raises(SystemExit) as exit:
@@ -191,6 +197,7 @@ class MapCurve:
         return self.curve[column]
 
 
+@vendor
 def test_force_map_files_become_one_recording_set_per_spot(tmp_path, monkeypatch, capsys):
     """Two map files (speeds) of 2×2 spots become four spots with two speeds each and their positions; a
     curve afmformats cannot import (no baseline) leaves its spot with the other speed, and says so."""
@@ -230,6 +237,7 @@ class Truncated(MapCurve):
         return np.asarray(self.curve[column])[self.start :]
 
 
+@vendor
 @pytest.mark.parametrize(
     ("name", "extra"),
     [
@@ -248,6 +256,7 @@ def test_one_vendor_approach_is_refused_in_one_line_saying_what_to_record(tmp_pa
     assert "\n" not in str(refusal.value) and "record the same spot at two or more speeds" in str(refusal.value)
 
 
+@vendor
 @pytest.mark.slow  # ~30 s: 6000 samples of a real creep through the whole chain
 def test_the_vendor_creep_is_diagnosed_in_its_creep(tmp_path, coarse_cache):
     # The creep is a set of its own: its approach is the elastic law, its creep the data, and the base model
