@@ -103,6 +103,26 @@ def test_a_held_contact_correction_is_refitted_in_the_profile_within_its_reach()
     assert fit.model.contact.reference.item() == 0.0  # the model as fitted: the profile only evaluates it
 
 
+def test_a_contact_held_beyond_its_reach_is_refitted_from_where_the_fit_holds_it():
+    # A term that grows as √w reads its contacts with its shape, and may hold the reference's beyond the onset's
+    # reach (a real creep with 5 Pa·s added: 1.98 µm against 1.40). Clamped to the reach, the profile began above the
+    # fit's χ² at the fit itself and closed both sides there: gamma 5.357160353382236 to 5.357160353382236. Its
+    # range now reaches where the fit holds it: below the slope the correction cannot go further, above it gives way
+    # down to the far end of its reach, and the textbook parabola starts there.
+    samples = line_samples()
+    model = LineWithContact(reach=0.0)
+    std = textbook_std(samples, fitted_line(samples, LineWithContact(reach=0.0))[0])
+    reach = 0.6 * math.sqrt(LEVEL) * std
+    with torch.no_grad():
+        model.contact.reference.fill_(4 * reach)
+    fit, index = fitted_line(samples, model)
+    fit.model.contact.reach, fit.reference_free = reach, False
+    low, high = profile_interval(fit, "b", std, samples, index)
+    b, half = fit.model.b.item(), math.sqrt(LEVEL) * std
+    assert low == pytest.approx(b - half, rel=1e-3)
+    assert high == pytest.approx(b + 4 * reach + reach + half, rel=1e-3)
+
+
 def test_no_wald_std_is_given_where_the_fit_holds_the_contact_or_the_profile_is_open():
     # The curvature takes a held correction as known; the interval above refits it (bench-set p06: g ± 0.0027, the
     # profile 0.1997 to 0.2147 where the curvature says 0.2016 to 0.2122).
