@@ -410,7 +410,7 @@ def test_a_term_the_recordings_name_already_is_not_added_up_the_ladder(tmp_path,
 
 def test_recordings_that_name_as_many_terms_as_are_fitted_together_say_another_needs_more():
     # The public JPK creep names solid_relaxation + power_law_rheology as recorded: with diagnosis.max_terms 2 no term
-    # added beside them can be named, whatever its size.
+    # added beside them both can be named, whatever its size; in place of one it can (a brain creep's viscosity).
     from types import SimpleNamespace
 
     from ptwin.pipeline.inject import _full
@@ -422,7 +422,7 @@ def test_recordings_that_name_as_many_terms_as_are_fitted_together_say_another_n
     settings = SimpleNamespace(diagnosis=SimpleNamespace(max_terms=2))
     assert _full(named("solid_relaxation", "power_law_rheology"), settings)[-1] == (
         "The recordings as they are name solid_relaxation + power_law_rheology, diagnosis.max_terms (2) already: a "
-        "term added beside them can be named only with diagnosis.max_terms=3."
+        "term added is named beside both only with diagnosis.max_terms=3; within 2, only in place of one of them."
     )
     assert _full(named("solid_relaxation"), settings) == [] and _full(named(), settings) == []
 

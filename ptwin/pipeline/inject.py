@@ -453,15 +453,19 @@ def _reach(peak: float, strength: str) -> str:
 
 def _full(as_recorded: RunResult, settings: InjectRunSettings) -> list[str]:
     """A line where the recordings as they are name ``diagnosis.max_terms`` terms already: a term added can be named
-    beside them only in a larger subset, which the diagnosis does not fit (a real creep names two)."""
+    beside them all only in a larger subset, which the diagnosis does not fit (a real creep names two), and within
+    the cap only in place of one of them (a real brain creep with 5 Pa·s added: the viscosity and the pore term,
+    where the recordings named a power law and the pore term)."""
     named = [entry["term"] for entry in as_recorded.diagnosis["left_out"]]
     cap = settings.diagnosis.max_terms
     if not named or len(named) < cap:
         return []
+    beside = {1: "it", 2: "both"}.get(len(named), f"all {len(named)}")
+    instead = "in its place" if len(named) == 1 else "in place of one of them"
     return [
         "",
-        f"The recordings as they are name {' + '.join(named)}, diagnosis.max_terms ({cap}) already: a term added "
-        f"beside them can be named only with diagnosis.max_terms={len(named) + 1}.",
+        f"The recordings as they are name {' + '.join(named)}, diagnosis.max_terms ({cap}) already: a term added is "
+        f"named beside {beside} only with diagnosis.max_terms={len(named) + 1}; within {cap}, only {instead}.",
     ]
 
 
