@@ -35,7 +35,7 @@ from ptwin.diagnosis.null import (
 from ptwin.diagnosis.words import MATERIAL, finite_or_none, summarise, times_better
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import rmse_of
-from ptwin.fitting.physics_fit import PhysicsFit, held_reach, rmse
+from ptwin.fitting.physics_fit import PhysicsFit, held_range, rmse
 from ptwin.fitting.pointwise import ApparentPermeability
 from ptwin.fitting.split import Split
 from ptwin.physics.elastic import ReferenceCurve
@@ -771,9 +771,9 @@ def _wald(std: float, interval: list[float | None], fit: PhysicsFit) -> float | 
     """``std``, the Wald std of a parameter of ``fit`` with the 95% profile ``interval``, where it is a statement of
     the data; else None. The Wald std is the curvature at the fit: along a flat side of the profile it is none, nor
     where the fit holds the reference's contact correction, which the curvature takes as known and the profile
-    refits (``held_reach``; bench-set p06: g ± 0.0027, 0.2016 to 0.2122 by the curvature, 0.1997 to 0.2147 by the
+    refits (``held_range``; bench-set p06: g ± 0.0027, 0.2016 to 0.2122 by the curvature, 0.1997 to 0.2147 by the
     profile, the truth 0.2)."""
-    return None if None in interval or held_reach(fit) is not None else std
+    return None if None in interval or held_range(fit) is not None else std
 
 
 def _absence(name: str, value: float) -> str:

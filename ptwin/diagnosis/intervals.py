@@ -2,7 +2,7 @@
 
 For one parameter of a fitted model the profile χ²_p(θ) is the least χ² with θ fixed
 and every other parameter refitted (a contact correction the fit holds too, within its
-reach: ``held_reach``). Under correlated noise the likelihood-ratio statistic is
+range: ``held_range``). Under correlated noise the likelihood-ratio statistic is
 Δχ²/κ² (κ²: the noise model's block-variance inflation), also divided by the reduced χ²
 of the fit where that exceeds 1 (the misfit is then larger than the noise
 model says, as the Wald variance assumes too), and the interval is where it stays
@@ -23,7 +23,7 @@ import math
 import torch
 
 from ptwin.fitting.lm import FitError, LevenbergMarquardt
-from ptwin.fitting.physics_fit import SETTLED, PhysicsFit, held_reach, scaled_residual
+from ptwin.fitting.physics_fit import SETTLED, PhysicsFit, held_range, scaled_residual
 from ptwin.physics.samples import Samples
 
 LEVEL = 3.841458820694124  # the 95% point of χ² with one degree of freedom
@@ -38,20 +38,14 @@ def profile_interval(
     """The 95% interval of the raw parameter ``raw_name`` (a name among the model's free parameters,
     e.g. 'fluid.log_permeability') on ``samples[index]``, in raw units; ``raw_std`` its Wald std (the
     first step). None on a side the data do not close. Where ``fit`` holds the reference's contact
-    correction, each profile point refits it too, within its reach (``held_reach``) and as far as where ``fit``
-    holds it: held by choice, it is a nuisance like every other."""
-    reach = held_reach(fit)
-    extra = ("contact.reference",) if reach is not None else ()
+    correction, each profile point refits it too, within its range (``held_range``): held by choice, it is a
+    nuisance like every other."""
+    span = held_range(fit)
+    extra = ("contact.reference",) if span is not None else ()
     vector, residual = scaled_residual(fit.model, samples, index, also=extra)
     theta = vector.get()
     j = vector.entry(raw_name)
     contact = vector.entry("contact.reference") if extra else None
-    # The correction's range: its reach either side of the estimate, and where the fit holds it, which a term that
-    # grows as √w may put beyond (its contacts read with its shape: 1.98 µm on a real creep whose onset reaches 1.40).
-    # Clamped short of that, the profile started above the fit's own χ² at θ̂ and closed each side there: an
-    # interval of zero width.
-    held = theta[contact].item() if extra else 0.0
-    lowest, highest = (min(-reach, held), max(reach, held)) if extra else (0.0, 0.0)
     others = [i for i in range(theta.numel()) if i != j]
     warm: dict[str, torch.Tensor] = {}  # the others at the last profile point, each side starting from θ̂
     reduced = fit.chi_square / max(fit.samples - theta.numel() + len(extra), 1)
@@ -74,8 +68,8 @@ def profile_interval(
         start[j] = theta[j] + offset
         try:
             full = refitted(start, others)
-            if contact is not None and not lowest <= full[contact].item() <= highest:  # held at an end, the rest refit
-                full[contact] = min(max(full[contact].item(), lowest), highest)
+            if contact is not None and not span[0] <= full[contact].item() <= span[1]:  # held at an end, the rest refit
+                full[contact] = min(max(full[contact].item(), span[0]), span[1])
                 full = refitted(full, [i for i in others if i != contact])
             warm["others"] = full[others]
             with torch.no_grad():

@@ -385,10 +385,13 @@ def later_contacts(fit: PhysicsFit) -> tuple[float, ...]:
     return tuple(fraction * fit.model.contact.reach for fraction in LATER)
 
 
-def held_reach(fit: PhysicsFit) -> float | None:
-    """How far either side of its estimate [m] ``fit``'s held reference contact correction may be: the reference's
-    onset (``ContactNuisance.reach``), within which a profile refits it (``ptwin.diagnosis.intervals``). None where
-    ``fit`` frees it (it is a parameter of the fit, and its intervals carry it) or has none.
+def held_range(fit: PhysicsFit) -> tuple[float, float] | None:
+    """Where [m, from its estimate] ``fit``'s held reference contact correction may be: the reference's onset
+    (``ContactNuisance.reach``) either side of the estimate, and as far as where ``fit`` holds it, which a term that
+    grows as √w may put beyond (its contacts read with its shape: 1.98 µm on a real creep whose onset reaches 1.40).
+    A profile refits it within this range (``ptwin.diagnosis.intervals``); clamped short of where the fit holds it,
+    the profile began above the fit's own χ² and closed every side at the estimate, an interval of zero width. None
+    where ``fit`` frees it (it is a parameter of the fit, and its intervals carry it) or has none.
 
     A correction is held where the data do not fix it within the onset, at one place (the estimate, or later where
     χ² falls beyond noise), a choice, not a measurement: a profile that held it there would report the contact as
@@ -398,9 +401,10 @@ def held_reach(fit: PhysicsFit) -> float | None:
     contacts estimated, g 0.2 concealed) the relaxation's g was 0.2016 to 0.2122 with the correction held at the
     estimate, 0.1997 to 0.2147 refitted; on p04 with γ 11.3 Pa·s added, the viscosity fitted alone held it 15 nm
     late, γ 6.99 (5.34 to 8.30), 3.16 to 13.0 refitted (the best contact for 11.3 is 17 nm before the estimate)."""
-    if held_at(fit) is None or not math.isfinite(fit.model.contact.reach):
+    held = held_at(fit)
+    if held is None or not math.isfinite(fit.model.contact.reach):
         return None
-    return fit.model.contact.reach
+    return min(-fit.model.contact.reach, held), max(fit.model.contact.reach, held)
 
 
 def held_as(model: ForceModel, fit: PhysicsFit) -> ForceModel:

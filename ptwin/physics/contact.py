@@ -23,8 +23,8 @@ stretch the force is at the baseline's noise and a contact there is a matter of 
 beyond it the recording itself says contact or no contact, and a correction that goes
 there is a misfit of the model absorbed (a cantilever drag left out moved it 600 nm into
 a 2.5 µm indentation, where the reference pushes back 80 nN). Held, it is still no known
-contact: every profile interval refits it within that stretch on either side
-(``ptwin.fitting.physics_fit.held_reach``).
+contact: every profile interval refits it within that stretch on either side, and as far as
+where the fit holds it (``ptwin.fitting.physics_fit.held_range``).
 """
 
 from __future__ import annotations
