@@ -148,11 +148,11 @@ class _HereditarySolve(Node):
     def backward(ctx, grad):
         extra, weights, times, time, solution = ctx.saved_tensors
         dual = _HereditarySolve.apply(grad, extra, weights, times, time, ctx.blocks, not ctx.transposed)
-        if not any(ctx.needs_input_grad[1:4]):
+        needs = ctx.needs_input_grad[1:4]
+        if not any(needs):
             return dual, None, None, None, None, None, None
         left, right = (solution, dual) if ctx.transposed else (dual, solution)
-        needs = ctx.needs_input_grad[1:4]
-        slopes = _operator_slopes(left, right, weights, times, time, ctx.blocks.geometry, needs[2])
+        slopes = _operator_slopes(left, right, weights, times, ctx.blocks.geometry, needs[2])
         return dual, *(-g if need else None for g, need in zip(slopes, needs)), None, None, None
 
 
@@ -161,7 +161,6 @@ def _operator_slopes(
     right: torch.Tensor,
     weights: torch.Tensor,
     times: torch.Tensor,
-    time: torch.Tensor,
     geometry: _Geometry,
     to_times: bool,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
@@ -170,7 +169,9 @@ def _operator_slopes(
 
     Plain torch ops and the recurrence's node, so the result differentiates again in all five; an autograd call
     here would also run on through the nodes that made ``left`` and ``right`` (this one among them). The modes'
-    decays are the geometry's where nothing differentiates them (their times need no gradient)."""
+    decays are the geometry's where nothing differentiates them (their times need no gradient); the sample times
+    are the geometry's."""
+    time = geometry.time
     start = torch.arange(time.numel(), device=time.device) == 0
     tau = times[:, None]
     decayed = decays(time, start, tau) if times.requires_grad else geometry.decayed
