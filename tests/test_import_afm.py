@@ -160,6 +160,26 @@ def test_a_force_map_file_imported_as_one_curve_is_refused_saying_use_map(tmp_pa
     assert not (tmp_path / "set").exists()
 
 
+def test_a_curve_cut_short_is_refused_as_one_and_not_as_a_baseline_too_short(tmp_path, monkeypatch, capsys):
+    # nanite's test files hold approaches of one to three samples; the error said to record from further away.
+    import afmformats
+
+    curve = StressRelaxation()
+    segment = curve.data["segment"]
+    approach = np.flatnonzero(segment == 1)
+    kept = np.r_[np.flatnonzero(segment != 1), approach[:3]]
+    kept.sort()
+    curve.data = {column: values[kept] for column, values in curve.data.items()}
+    curve.data["height (measured)"][curve.data["segment"] == 1] = 48e-6
+    monkeypatch.setattr(afmformats, "load_data", lambda path, meta_override=None: [curve])
+    with pytest.raises(SystemExit) as stop:
+        main(["bead7.jpk-force", "--out", str(tmp_path / "set"), *COMMON])
+    assert stop.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert error == "bead7.jpk-force: its approach is 3 sample(s) over no travel, not a curve; record it again"
+    assert not (tmp_path / "set").exists()
+
+
 def test_a_file_afmformats_does_not_read_is_refused_in_one_line(tmp_path, capsys):
     # afmformats' errors are BaseExceptions: FileFormatNotSupportedError escaped as a traceback.
     (tmp_path / "notes.txt").write_text("not a force curve\n")

@@ -106,6 +106,10 @@ def curve_rows(data, label: str, speed: float | None) -> tuple[pd.DataFrame, flo
     force = np.asarray(data["force"], dtype=np.float64)
     approach = np.flatnonzero(kind == "approach")
     travel = (height - height[approach[0]]) * np.sign(height[approach[-1]] - height[approach[0]])
+    if np.ptp(travel[approach]) == 0:  # a recording cut short (nanite's test files hold approaches of 1–3 samples)
+        raise RecordingError(
+            f"{label}: its approach is {approach.size} sample(s) over no travel, not a curve; record it again"
+        )
     # Some files (Asylum .ibw) store approach and retract as one segment: the approach ends at its deepest.
     retracting = approach[int(np.argmax(travel[approach])) + 1 :]
     kind[retracting] = "retract"
