@@ -99,7 +99,7 @@ def test_a_viscosity_added_to_a_set_is_found_with_its_size(default_set, tmp_path
 
 def test_a_verdict_says_which_other_terms_the_diagnosis_named():
     # 5 Pa s added to real agarose came back as pore_pressure_relaxation + solid_relaxation; "not named" alone hid it.
-    others = ("pore_pressure_relaxation (strong)", "solid_relaxation (weak)")
+    others = (("pore_pressure_relaxation", "strong"), ("solid_relaxation", "weak"))
     missed = Trial(1.0, 5.0, 36.6, "", None, [None, None], False, True, -5.72, others)
     assert missed.verdict(Own("gamma", 0.0)) == (
         "not named (gamma -5.72 fitted alone); the diagnosis named pore_pressure_relaxation (strong) + "
@@ -174,21 +174,22 @@ def test_the_recordings_own_strength_a_size_is_read_over_is_said_as_the_data_fix
 def test_a_term_read_as_another_it_cannot_be_told_from_says_so():
     # Real-noise PAAm null (bench-set p03) with g 0.33 of solid_relaxation added: the diagnosis named
     # strain_dependent_permeability (weak) and listed the two as confounded; the verdict read as a wrong answer.
-    named = ("strain_dependent_permeability (weak)",)
-    missed = Trial(64.0, 0.328, 64.0, "", None, [None, None], False, True, 1.86, named, confounded=named)
+    named = (("strain_dependent_permeability", "weak"),)
+    rival = ("strain_dependent_permeability",)
+    missed = Trial(64.0, 0.328, 64.0, "", None, [None, None], False, True, 1.86, named, confounded=rival)
     assert missed.verdict(Own("g", 0.0)) == (
         "not named (g 1.86 fitted alone); the diagnosis named strain_dependent_permeability (weak) in its place: "
         "these recordings cannot tell the two apart"
     )
-    both = ("pore_pressure_relaxation (strong)", *named)
-    partly = Trial(64.0, 0.328, 64.0, "", None, [None, None], False, True, 1.86, both, confounded=named)
+    both = (("pore_pressure_relaxation", "strong"), *named)
+    partly = Trial(64.0, 0.328, 64.0, "", None, [None, None], False, True, 1.86, both, confounded=rival)
     assert partly.verdict(Own("g", 0.0)).endswith(
         "the diagnosis named pore_pressure_relaxation (strong) + strain_dependent_permeability (weak); "
         "strain_dependent_permeability (weak) in its place: these recordings cannot tell the two apart"
     )
     # Real PAAm (`PAA_speed {5,10,15}_4nN`) with 5 Pa·s added: the rival was named as recorded too, so it was not read
     # in the term's place; it read "…(weak), as in the recordings as they are in its place: …".
-    before = replace(missed, recorded=("strain_dependent_permeability",))
+    before = replace(missed, recorded=rival)
     assert before.verdict(Own("g", 0.0)).endswith(
         "the diagnosis named strain_dependent_permeability (weak), as in the recordings as they are; "
         "strain_dependent_permeability (weak) explains the data as well as the term added: "

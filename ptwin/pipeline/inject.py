@@ -114,8 +114,8 @@ class Trial:
     unexplained: bool
     candidate: bool  # whether the diagnosis fitted the term at all (see ``no_candidate``)
     alone: float | None = None  # the strength fitted with the term alone beside the base model, named or not
-    others: tuple[str, ...] = ()  # the other terms the diagnosis named, each with its confidence
-    # those of ``others`` the diagnosis could not tell from the term (a group of ``diagnosis.json``'s "confounded")
+    others: tuple[tuple[str, str], ...] = ()  # the other terms the diagnosis named: (term, confidence)
+    # the terms of ``others`` the diagnosis could not tell from the term (a group of ``diagnosis.json``'s "confounded")
     confounded: tuple[str, ...] = ()
     recorded: tuple[str, ...] = ()  # the terms of ``others`` the diagnosis of the recordings as they are names too
     why: tuple[str, ...] = ()  # where it was not named: the diagnosis's notes on the term (which rule left it out)
@@ -133,15 +133,15 @@ class Trial:
         of no fluid force to 1.2e-15 m²)."""
         strength = own.strength
         if not self.confidence:
-            others = f"; the diagnosis named {' + '.join(self.others)}{self._as_recorded()}" if self.others else ""
+            others = f"; the diagnosis named {self._listed()}{self._as_recorded()}" if self.others else ""
             if self.confounded:
-                rivals, pair = " + ".join(self.confounded), "the two" if len(self.confounded) == 1 else "them"
-                if all(rival.split(" (")[0] in self.recorded for rival in self.confounded):
+                rivals, pair = self._listed(self.confounded), "the two" if len(self.confounded) == 1 else "them"
+                if all(rival in self.recorded for rival in self.confounded):
                     # named as recorded too: not read in the term's place, yet no worse an account of the data
                     explain = "explains" if len(self.confounded) == 1 else "explain"
                     others += f"; {rivals} {explain} the data as well as the term added"
                 else:
-                    which = "" if self.confounded == self.others else f"; {rivals}"
+                    which = "" if len(self.confounded) == len(self.others) else f"; {rivals}"
                     others += f"{which} in its place"
                 others += f": these recordings cannot tell {pair} apart"
             said = "unexplained" if self.unexplained else "not named"
@@ -162,7 +162,7 @@ class Trial:
                 # no term explains at g 1.41e+03 for the 0.546 added)
                 share = own.share(beyond, self.added)
                 size = f"; {number(beyond, '.3g')} over the recordings' own, {share:.3g}× the size added"
-        beside = f"; beside it {' + '.join(self.others)}{self._as_recorded()}" if self.others else ""
+        beside = f"; beside it {self._listed()}{self._as_recorded()}" if self.others else ""
         return f"named ({self.confidence}), {strength} {found}{size}{beside}"
 
     def found_words(self) -> str:
@@ -176,6 +176,11 @@ class Trial:
         if self.alone_interval is None and not self.alone_misses_data:
             return f"{self.alone:.3g} fitted alone"
         return "fitted alone: " + bounded(self.alone, self.alone_interval, ".3g", misses_data=self.alone_misses_data)
+
+    def _listed(self, terms: tuple[str, ...] | None = None) -> str:
+        """The other terms named (those of ``terms`` only, where given), each with its confidence."""
+        listed = [(term, confidence) for term, confidence in self.others if terms is None or term in terms]
+        return " + ".join(f"{term} ({confidence})" for term, confidence in listed)
 
     def _as_recorded(self) -> str:
         """Words for the other terms named that the recordings as they are name too: the added term was not read
@@ -487,7 +492,7 @@ def _trial(
     diagnosis, candidate = outcome.diagnosis, term in outcome.candidates
     unexplained, permeability = diagnosis["unexplained"], outcome.base_permeability
     named = [e for e in diagnosis["left_out"] if e["term"] != term]
-    others = tuple(f"{e['term']} ({e['confidence']})" for e in named)
+    others = tuple((e["term"], e["confidence"]) for e in named)
     before = set() if as_recorded is None else {e["term"] for e in as_recorded.diagnosis["left_out"]}
     recorded = tuple(e["term"] for e in named if e["term"] in before)
     entry = next((e for e in diagnosis["left_out"] if e["term"] == term), None)
@@ -497,7 +502,7 @@ def _trial(
         alone_misses_data = term in outcome.alone and alone_interval is None
         why = tuple(note for note in diagnosis["notes"] if term in note)
         rivals = {other for group in diagnosis["confounded"] if term in group["terms"] for other in group["terms"]}
-        confounded = tuple(f"{e['term']} ({e['confidence']})" for e in named if e["term"] in rivals)
+        confounded = tuple(e["term"] for e in named if e["term"] in rivals)
         return Trial(
             size,
             added,
