@@ -638,6 +638,29 @@ def test_no_structure_is_said_as_what_the_test_found_not_as_a_model_that_fits(ra
     sentence = summarise(d, None, ABOVE_FIVE)
     assert "explains every curve" not in sentence and f"validation RMS {ratio:.2f}× the noise std" in sentence
     assert ("cannot tell from what their noise could leave" in sentence) == warned
+    assert "hybrid twin" not in sentence  # no twin trained
+
+
+@pytest.mark.parametrize(("twin", "said"), [(1.18, True), (2.3, False), (None, False)])
+def test_a_large_misfit_the_twin_learns_says_every_k_rests_on_the_models_fitted(twin, said):
+    # A viscosity and a strain-dependent K at half bench-set p09's sizes under AR(1) noise whose κ² its short
+    # baselines read 2.8× high: no structure, the base model 2.50× the noise std, the twin 1.18×, and a K interval
+    # of the base model and its rivals that missed the truth by 23% with nothing said of it.
+    from types import SimpleNamespace
+
+    from ptwin.diagnosis.words import summarise
+
+    d = SimpleNamespace(
+        detected=False,
+        fit={"base": {"val_rmse": 2.5e-10}, "hybrid": {"val_rmse": None if twin is None else twin * 1e-10}},
+        noise_floor=1e-10,
+        whiteness={"base": 6.8},
+        confounded=[],
+        permeability={"corrected": 2.17e-16, "corrected_interval": [2.15e-16, 2.31e-16]},
+    )
+    sentence = summarise(d, None, ABOVE_FIVE)
+    assert ("The hybrid twin predicts the validation samples at 1.18× the noise std" in sentence) == said
+    assert ("every K here holds only if one of them is right" in sentence) == said
 
 
 def test_a_term_named_beside_unexplained_structure_gets_no_interval_and_says_why(monkeypatch):
