@@ -89,6 +89,36 @@ def test_baselines_that_read_the_noise_too_correlated_are_capped_by_what_the_res
     assert [entry["term"] for entry in diagnosis["left_out"]] == ["pore_pressure_relaxation"]
 
 
+@pytest.mark.slow  # a whole run with every pair fitted: half a minute
+def test_a_drag_the_baselines_of_known_contacts_refute_is_not_named_in_a_pairs_place(tmp_path, coarse_cache):
+    # A viscosity (γ 7.5) beside a strain-dependent K (m 1.4) in the shared p07's setting, contacts known: the
+    # samples before contact were not fitted, a drag alone beat the base model by the BIC margin on the fastest
+    # curve's misfit, only its pairs were grown, and drag + strain-dependent K was named strong (b 4.4e-5 N s/m,
+    # 2.8 nN of offset on the fastest baseline, which the recording holds at 0). Fitted, those samples refute it.
+    from dataclasses import replace
+
+    from ptwin.data.recordings import write_recordings
+    from ptwin.synth.simulator import Experiment, simulate
+
+    effects = {"solid_viscosity": {"gamma": 7.5}, "strain_dependent_permeability": {"m": 1.4}}
+    experiment = Experiment(
+        **dict(probe_radius=10e-6, spring_constant=2.0, sample_thickness=5e-3, permeability=3e-16),
+        **dict(effective_modulus=1.5e4, base_speeds=(1e-6, 4e-6, 16e-6, 64e-6), samples=1500),
+        **dict(z_start=-0.3e-6, z_end=2.65e-6, noise_std=2.5e-10, noise_correlation=math.exp(-1 / 20)),
+        noise_white_share=0.4,
+        effects=effects,
+    )
+    meta, curves = simulate(experiment)
+    write_recordings(tmp_path / "set", replace(meta, noise_std=experiment.noise_std), curves)
+    diagnosis = run(tmp_path / "set", coarse_cache, tmp_path / "run", "diagnosis.design=false").diagnosis
+    named = {entry["term"]: entry["params"] for entry in diagnosis["left_out"]}
+    assert set(named) == set(effects)
+    assert named["solid_viscosity"]["gamma"] == pytest.approx(7.5, rel=0.15)
+    assert named["strain_dependent_permeability"]["m"] == pytest.approx(1.4, rel=0.15)
+    low, high = diagnosis["permeability"]["corrected_interval"]
+    assert low <= experiment.permeability <= high
+
+
 def test_concealed_viscosity_is_named_and_refitted(viscous_run):
     diagnosis = viscous_run.diagnosis
     assert diagnosis["mismatch"]["detected"] is True

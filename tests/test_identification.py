@@ -128,7 +128,7 @@ def test_curve_split_holds_out_the_fastest_curve_whole(prepared):
     split = split_samples(samples, (0.7, 0.15, 0.15), "curve", None, seed=0)
     assert split.held_out_curve == "v80"
     fastest = samples.curve_ids.index("v80")
-    held = torch.nonzero((samples.curve == fastest) & samples.in_contact).squeeze(1)
+    held = torch.nonzero((samples.curve == fastest) & samples.fitted).squeeze(1)  # its samples just before contact too
     assert torch.equal(split.test, held)
     rest = torch.cat([split.train, split.val])
     assert not (samples.curve[rest] == fastest).any()

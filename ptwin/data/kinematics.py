@@ -67,7 +67,9 @@ class CurveKinematics:
     baseline_offset: float | None  # pre-contact force [N]: its mean (known contact), the removed line's at
     # contact (estimated contact), None without pre-contact samples
     baseline: Baseline | None  # the estimated contact and removed baseline (contact_point: estimate)
-    pins_contact: np.ndarray | None = None  # bool: pre-contact samples fitted with an estimated contact
+    # bool: the pre-contact samples just before contact, fitted (not judged): they pin an estimated contact, and
+    # with a known one they show what a rate force there would offset (a drag, b·v before any contact)
+    pins_contact: np.ndarray | None = None
     unresolved: np.ndarray | None = None  # bool: samples whose velocity the sampling does not resolve
 
     def __post_init__(self):
@@ -210,7 +212,7 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
                 noise=noise,
                 baseline_offset=offset,
                 baseline=baseline,
-                pins_contact=pre_contact & ~free & (z >= -depth.max()) if baseline is not None else None,
+                pins_contact=pre_contact & ~free & (z >= -depth.max()),
                 # A noise-free curve (a simulation's) gives no scale to judge by: nothing is left out.
                 unresolved=unresolved_motion(time, depth, segment != RETRACT) if noise.std > 0 else None,
             )

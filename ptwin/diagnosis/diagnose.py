@@ -362,8 +362,8 @@ def first_fits(
 def _held_out_test(
     samples: Samples, split: Split, seen: torch.Tensor, test: StructureTest, noise: NoiseModel, s: DiagnosisSettings
 ) -> HeldOutTest:
-    """The held-out test on the validation samples ``seen`` judges, and on those pinning estimated contacts where
-    there are some (the null there is the noise model's alone: no elastic law before contact)."""
+    """The held-out test on the validation samples ``seen`` judges, and on those just before contact where there
+    are some (``Split.pinning``; the null there is the noise model's alone: no elastic law before contact)."""
     validation = torch.isin(seen, split.val).cpu().numpy()
     pins = split.pinning(samples)
     pinning_validation = torch.isin(pins, split.val).cpu().numpy()

@@ -50,7 +50,7 @@ class Candidate:
     whiteness: float  # of the residual on train + val, in units of the noise model
     failure: str | None = None  # why the fit failed
     residual: np.ndarray | None = None  # model − measured on the judged samples (noise units); None: failed
-    pinning: np.ndarray | None = None  # model − measured on the samples pinning an estimated contact (noise units)
+    pinning: np.ndarray | None = None  # model − measured on the samples just before contact (noise units)
 
     @property
     def usable(self) -> bool:
@@ -244,7 +244,7 @@ def _preferred(candidates: dict, size: int, bic_margin: float) -> list[tuple[str
 
 
 def _candidate(subset, fit, make_model, samples, split, judged, iterations, block, base=None) -> Candidate:
-    """``judged``: (the judged samples, those pinning an estimated contact), as ``Split`` gives them."""
+    """``judged``: (the judged samples, those just before contact), as ``Split`` gives them."""
     try:
         fit = fit or fit_with_starts(make_model, subset, samples, split.train, iterations, base)
     except FitError as error:
@@ -260,8 +260,8 @@ def _candidate(subset, fit, make_model, samples, split, judged, iterations, bloc
 
 @dataclass(frozen=True)
 class HeldOutEvidence:
-    """What one model gains over another on the validation samples: in contact, and where contacts are estimated,
-    on the samples pinning them too, each part a ``TermEvidence`` at its share of the false-alarm rate."""
+    """What one model gains over another on the validation samples: in contact, and on the samples just before
+    contact too, each part a ``TermEvidence`` at its share of the false-alarm rate."""
 
     parts: tuple[TermEvidence, ...]
 
@@ -295,7 +295,7 @@ class HeldOutTest:
     test: StructureTest
     validation: np.ndarray  # bool over the judged samples
     false_alarm: float
-    pinning: StructureTest | None = None  # the noise model's null on the samples pinning estimated contacts
+    pinning: StructureTest | None = None  # the noise model's null on the samples just before contact
     pinning_validation: np.ndarray | None = None  # bool over those samples
 
     def evidence(self, smaller: Candidate, larger: Candidate, label: str) -> HeldOutEvidence:

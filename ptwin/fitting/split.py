@@ -19,14 +19,14 @@ class Split:
 
     def judged(self, samples: Samples) -> torch.Tensor:
         """The train and validation samples in contact: where a residual's structure is judged. The samples
-        pinning an estimated contact are fitted, not judged: just before contact a real force leaves the
-        baseline line (long-range forces, a curved virtual deflection), which is no physics left out."""
+        just before contact (``pins_contact``) are fitted, not judged: there a real force leaves the baseline
+        line (long-range forces, a curved virtual deflection), which is no physics left out."""
         seen = self._seen()
         return seen[samples.in_contact[seen]]
 
     def pinning(self, samples: Samples) -> torch.Tensor:
-        """The train and validation samples that pin an estimated contact: not judged for structure, but where
-        held-out samples show a contact misplaced (``ptwin.diagnosis.name.HeldOutTest``)."""
+        """The train and validation samples just before contact: not judged for structure, but where held-out
+        samples show a contact misplaced or a drag that is not there (``ptwin.diagnosis.name.HeldOutTest``)."""
         seen = self._seen()
         return seen[samples.pins_contact[seen]]
 

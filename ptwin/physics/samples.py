@@ -32,7 +32,7 @@ class Samples:
     noise_inflation: float = 1.0  # κ² of the set's noise: block-mean variance over the white expectation
     segment: torch.Tensor | None = None  # long: 0 approach, 1 hold, 2 retract (None: all approach)
     nominal_speed: torch.Tensor | None = None  # the curve's approach speed [m/s] (None: base_speed)
-    pins_contact: torch.Tensor | None = None  # bool: pre-contact samples that pin an estimated contact (None: none)
+    pins_contact: torch.Tensor | None = None  # bool: pre-contact samples fitted (``CurveKinematics``; None: none)
     curve_inflation: torch.Tensor | None = None  # κ² of each sample's curve for the whiteness test (None: the set's)
 
     def __post_init__(self):
@@ -47,7 +47,7 @@ class Samples:
 
     @property
     def fitted(self) -> torch.Tensor:
-        """bool: the samples a fit may use: those in contact and those pinning an estimated contact."""
+        """bool: the samples a fit may use: those in contact and those just before it (``pins_contact``)."""
         return self.in_contact | self.pins_contact
 
     @classmethod
