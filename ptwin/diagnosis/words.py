@@ -143,8 +143,8 @@ def _learned_by_twin(d, ratio: float) -> str:
     """Where no structure is found under a large misfit (``UNRESOLVED``), what the hybrid twin predicts, where it
     learned most of it (more than half the base model's mean square over the noise's): every K said then rests on
     one of the models fitted being right. A viscosity and a strain-dependent K at half bench-set p09's sizes, AR(1)
-    noise read κ² 44 off 460 baseline samples (the noise's 15.6): the base model 2.50× the noise std, the twin
-    1.18×, and K's 95% interval [2.15e-16, 2.31e-16] m² for 3e-16."""
+    noise read κ² 44 off 460 baseline samples (the noise's 15.6): the base model 2.81× the noise std, the twin
+    1.64×, and K's 95% interval [2.15e-16, 2.30e-16] m² for 3e-16."""
     twin = d.fit.get("hybrid", {}).get("val_rmse")
     if twin is None or ratio**2 - (twin / d.noise_floor) ** 2 <= (ratio**2 - 1.0) / 2:
         return ""
