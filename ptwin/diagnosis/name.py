@@ -271,7 +271,7 @@ class HeldOutEvidence:
 
     def words(self) -> str:
         contact, *pinning = (part.words() for part in self.parts)
-        return contact + "".join(f"; on the samples pinning the contacts, {words}" for words in pinning)
+        return contact + "".join(f"; on the samples just before contact, {words}" for words in pinning)
 
 
 @dataclass(frozen=True)
