@@ -60,30 +60,41 @@ def test_a_noise_std_the_twins_residual_says_may_read_low_is_said_with_its_bound
     assert not any("read off second differences" in note for note in clean_run[0].diagnosis["notes"])
 
 
+P07_MEMORY, P07_WHITE = math.exp(-1 / 20), 0.4  # the shared p07's noise: AR(1) of 20-sample memory, 40% white
+
+
+def diagnosed_in_p07_setting(folder, coarse_cache, effects: dict, **experiment) -> tuple:
+    """(the experiment, its set's diagnosis) in the shared p07's setting: known contacts, four baselines of 0.3 µm,
+    the noise std in meta.yaml (``experiment``: a seed, say)."""
+    from dataclasses import replace
+
+    from ptwin.data.recordings import write_recordings
+    from ptwin.synth.simulator import Experiment, simulate
+
+    truth = Experiment(
+        **dict(probe_radius=10e-6, spring_constant=2.0, sample_thickness=5e-3, permeability=3e-16),
+        **dict(effective_modulus=1.5e4, base_speeds=(1e-6, 4e-6, 16e-6, 64e-6), samples=1500),
+        **dict(z_start=-0.3e-6, z_end=2.65e-6, noise_std=2.5e-10, noise_correlation=P07_MEMORY),
+        noise_white_share=P07_WHITE,
+        effects=effects,
+        **experiment,
+    )
+    meta, curves = simulate(truth)
+    write_recordings(folder / "set", replace(meta, noise_std=truth.noise_std), curves)
+    return truth, run(folder / "set", coarse_cache, folder / "run", "diagnosis.design=false").diagnosis
+
+
 def test_baselines_that_read_the_noise_too_correlated_are_capped_by_what_the_residuals_show(tmp_path, coarse_cache):
     # The shared p07's setting: four baselines of 160 samples of AR(1) noise of 20-sample memory, 40% white, a pore
     # relaxation of M 5e4. At this seed the baselines read κ² 38 (the fastest curve alone 45) for the noise's 15.6,
     # and the pore went unnamed; the residuals in contact read 21 (the noise and the elastic law's inherited noise),
     # which caps it, and the pore is named.
-    from dataclasses import replace
-
     from ptwin.data.noise import model_inflation
-    from ptwin.data.recordings import write_recordings
     from ptwin.pipeline.run import CAPPED
-    from ptwin.synth.simulator import Experiment, simulate
 
-    memory, white = math.exp(-1 / 20), 0.4
-    experiment = Experiment(
-        **dict(probe_radius=10e-6, spring_constant=2.0, sample_thickness=5e-3, permeability=3e-16),
-        **dict(effective_modulus=1.5e4, base_speeds=(1e-6, 4e-6, 16e-6, 64e-6), samples=1500),
-        **dict(z_start=-0.3e-6, z_end=2.65e-6, noise_std=2.5e-10, noise_correlation=memory, noise_white_share=white),
-        seed=4,
-        effects={"pore_pressure_relaxation": {"M": 5.0e4}},
-    )
-    meta, curves = simulate(experiment)
-    write_recordings(tmp_path / "set", replace(meta, noise_std=experiment.noise_std), curves)
-    diagnosis = run(tmp_path / "set", coarse_cache, tmp_path / "run", "diagnosis.design=false").diagnosis
-    truth = model_inflation(1 - white, memory, 50)
+    effects = {"pore_pressure_relaxation": {"M": 5.0e4}}
+    _, diagnosis = diagnosed_in_p07_setting(tmp_path, coarse_cache, effects, seed=4)
+    truth = model_inflation(1 - P07_WHITE, P07_MEMORY, 50)
     assert CAPPED in diagnosis["noise"]["source"]
     assert truth <= diagnosis["noise"]["inflation"] < 1.5 * truth
     assert [entry["term"] for entry in diagnosis["left_out"]] == ["pore_pressure_relaxation"]
@@ -95,22 +106,8 @@ def test_a_drag_the_baselines_of_known_contacts_refute_is_not_named_in_a_pairs_p
     # samples before contact were not fitted, a drag alone beat the base model by the BIC margin on the fastest
     # curve's misfit, only its pairs were grown, and drag + strain-dependent K was named strong (b 4.4e-5 N s/m,
     # 2.8 nN of offset on the fastest baseline, which the recording holds at 0). Fitted, those samples refute it.
-    from dataclasses import replace
-
-    from ptwin.data.recordings import write_recordings
-    from ptwin.synth.simulator import Experiment, simulate
-
     effects = {"solid_viscosity": {"gamma": 7.5}, "strain_dependent_permeability": {"m": 1.4}}
-    experiment = Experiment(
-        **dict(probe_radius=10e-6, spring_constant=2.0, sample_thickness=5e-3, permeability=3e-16),
-        **dict(effective_modulus=1.5e4, base_speeds=(1e-6, 4e-6, 16e-6, 64e-6), samples=1500),
-        **dict(z_start=-0.3e-6, z_end=2.65e-6, noise_std=2.5e-10, noise_correlation=math.exp(-1 / 20)),
-        noise_white_share=0.4,
-        effects=effects,
-    )
-    meta, curves = simulate(experiment)
-    write_recordings(tmp_path / "set", replace(meta, noise_std=experiment.noise_std), curves)
-    diagnosis = run(tmp_path / "set", coarse_cache, tmp_path / "run", "diagnosis.design=false").diagnosis
+    experiment, diagnosis = diagnosed_in_p07_setting(tmp_path, coarse_cache, effects)
     named = {entry["term"]: entry["params"] for entry in diagnosis["left_out"]}
     assert set(named) == set(effects)
     assert named["solid_viscosity"]["gamma"] == pytest.approx(7.5, rel=0.15)
