@@ -146,10 +146,13 @@ def _learned_by_twin(d, ratio: float) -> str:
     noise read κ² 44 off 460 baseline samples (the noise's 15.6): the base model 2.81× the noise std, the twin
     1.64×, and K's 95% interval [2.15e-16, 2.30e-16] m² for 3e-16."""
     twin = d.fit.get("hybrid", {}).get("val_rmse")
-    if twin is None or ratio**2 - (twin / d.noise_floor) ** 2 <= (ratio**2 - 1.0) / 2:
+    if twin is None:
+        return ""
+    twin_ratio = twin / d.noise_floor
+    if ratio**2 - twin_ratio**2 <= (ratio**2 - 1.0) / 2:
         return ""
     return (
-        f" The hybrid twin predicts the validation samples at {twin / d.noise_floor:.2f}× the noise std: its network "
+        f" The hybrid twin predicts the validation samples at {twin_ratio:.2f}× the noise std: its network "
         "learned what the base model misses, which may be physics none of the models fitted has, so every K here "
         "holds only if one of them is right."
     )
