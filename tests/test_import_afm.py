@@ -130,40 +130,36 @@ def test_a_file_lacking_its_calibration_says_which_options_to_pass(tmp_path, cap
     assert "--sensitivity" in error and "--spring-constant" in error
 
 
-def test_a_file_without_a_spring_constant_says_to_pass_it(tmp_path, monkeypatch, capsys):
-    # AFM Workshop's CSV holds force in newtons and no spring constant: afmformats' metadata raised a traceback.
+def refused(tmp_path, monkeypatch, capsys, name: str, datasets: list) -> str:
+    """The one line ``main`` ends with on a file afmformats reads as ``datasets``: exit code 2, nothing written."""
     import afmformats
 
+    monkeypatch.setattr(afmformats, "load_data", lambda path, meta_override=None: datasets)
+    with pytest.raises(SystemExit) as stop:
+        main([name, "--out", str(tmp_path / "set"), *COMMON])
+    assert stop.value.code == 2
+    assert not (tmp_path / "set").exists()
+    return capsys.readouterr().err.strip()
+
+
+def test_a_file_without_a_spring_constant_says_to_pass_it(tmp_path, monkeypatch, capsys):
+    # AFM Workshop's CSV holds force in newtons and no spring constant: afmformats' metadata raised a traceback.
     curve = StressRelaxation()
     del curve.metadata["spring constant"]
-    monkeypatch.setattr(afmformats, "load_data", lambda path, meta_override=None: [curve])
-    with pytest.raises(SystemExit) as stop:
-        main(["single.csv", "--out", str(tmp_path / "set"), *COMMON])
-    assert stop.value.code == 2
-    error = capsys.readouterr().err.strip()
+    error = refused(tmp_path, monkeypatch, capsys, "single.csv", [curve])
     assert error == "single.csv: the file gives no spring constant; pass --spring-constant in N/m"
-    assert not (tmp_path / "set").exists()
 
 
 def test_a_force_map_file_imported_as_one_curve_is_refused_saying_use_map(tmp_path, monkeypatch, capsys):
     # Its first curve alone was written, the others silently dropped.
-    import afmformats
-
     spots = [MapCurve(StressRelaxation(), column, 0, 10e-6) for column in range(2)]
-    monkeypatch.setattr(afmformats, "load_data", lambda path, meta_override=None: spots)
-    with pytest.raises(SystemExit) as stop:
-        main(["map.jpk-force-map", "--out", str(tmp_path / "set"), *COMMON])
-    assert stop.value.code == 2
-    assert capsys.readouterr().err.strip() == (
+    assert refused(tmp_path, monkeypatch, capsys, "map.jpk-force-map", spots) == (
         "map.jpk-force-map: 2 curves in one file; import it with --map (a recording set per spot)"
     )
-    assert not (tmp_path / "set").exists()
 
 
 def test_a_curve_cut_short_is_refused_as_one_and_not_as_a_baseline_too_short(tmp_path, monkeypatch, capsys):
     # nanite's test files hold approaches of one to three samples; the error said to record from further away.
-    import afmformats
-
     curve = StressRelaxation()
     segment = curve.data["segment"]
     approach = np.flatnonzero(segment == 1)
@@ -171,13 +167,8 @@ def test_a_curve_cut_short_is_refused_as_one_and_not_as_a_baseline_too_short(tmp
     kept.sort()
     curve.data = {column: values[kept] for column, values in curve.data.items()}
     curve.data["height (measured)"][curve.data["segment"] == 1] = 48e-6
-    monkeypatch.setattr(afmformats, "load_data", lambda path, meta_override=None: [curve])
-    with pytest.raises(SystemExit) as stop:
-        main(["bead7.jpk-force", "--out", str(tmp_path / "set"), *COMMON])
-    assert stop.value.code == 2
-    error = capsys.readouterr().err.strip()
+    error = refused(tmp_path, monkeypatch, capsys, "bead7.jpk-force", [curve])
     assert error == "bead7.jpk-force: its approach is 3 sample(s) over no travel, not a curve; record it again"
-    assert not (tmp_path / "set").exists()
 
 
 def test_a_file_afmformats_does_not_read_is_refused_in_one_line(tmp_path, capsys):
