@@ -1,8 +1,9 @@
 """python -m ptwin.data.import_afm FILES... --out DIR --probe-radius R --viscosity MU --thickness H0 [--map]
 
 Vendor AFM files (JPK .jpk-force, Asylum .ibw, NT-MDT text and whatever afmformats
-reads) into one recording set, one curve per file: force-distance, stress-relaxation and
-creep-compliance curves alike, sets mixing them too. With ``--map``, force-map files (e.g.
+reads; JPK's text exports, which it does not, through ``ptwin.data.jpk_text``) into one
+recording set, one curve per file: force-distance, stress-relaxation and creep-compliance
+curves alike, sets mixing them too. With ``--map``, force-map files (e.g.
 JPK .jpk-force-map, one per speed or protocol) into a force map: a recording set per spot,
 spots matched across the files by their grid index, each with its position. What no file
 knows (probe radius, fluid viscosity, sample thickness, and for some formats the spring
@@ -33,6 +34,7 @@ import afmformats
 import numpy as np
 import pandas as pd
 
+from ptwin.data import jpk_text
 from ptwin.data.contact import NoBaseline, estimate_baseline
 from ptwin.data.recordings import Meta, RecordingError, load_recordings, write_recordings
 
@@ -53,7 +55,9 @@ HEIGHT = "height (measured)"
 
 def load_datasets(path: Path, overrides: dict) -> list:
     """Every force-distance dataset afmformats reads from ``path`` (one for a curve file, one per spot and
-    curve for a force map)."""
+    curve for a force map); JPK's text exports, which it does not read, through ``ptwin.data.jpk_text``."""
+    if jpk_text.is_text_export(path):
+        return jpk_text.load(path, overrides, SEGMENTS_OF)
     quiet = logging.getLogger("afmformats")
     level, quiet.level = quiet.level, logging.CRITICAL  # it logs a traceback for every error it then raises
     try:
