@@ -10,6 +10,7 @@ import pytest
 
 from ptwin.data.import_afm import main
 from ptwin.data.recordings import load_recordings
+from tests.conftest import run
 
 COMMON = ["--probe-radius", "5.0e-6", "--viscosity", "1.0e-3", "--thickness", "1.0e-4"]
 SPRING_CONSTANT, SENSITIVITY = 0.1, 5.0e-8  # [N/m], [m/V] in the simulated export's header
@@ -142,3 +143,16 @@ def test_real_jpk_text_exports_become_a_stress_relaxation_and_an_approach(tmp_pa
     assert relaxation.meta.spring_constant == pytest.approx(52.91, rel=1e-3)
     approach = load_recordings(tmp_path / "approach").curves
     assert set(approach["segment"]) == {"approach"} and approach["z"].iloc[0] < 0 < approach["z"].iloc[-1]
+
+
+@real
+@pytest.mark.slow  # ~1 min: 21,500 samples of a real stress relaxation through the whole chain
+def test_one_real_ramp_and_hold_from_a_text_export_is_diagnosed_in_its_hold(tmp_path, coarse_cache):
+    # One curve, one speed: what ptwin can tell, it tells from the hold. The force relaxes at constant height,
+    # which the base model (elastic + Darcy at this curve's K) misses; a hereditary term of the vocabulary
+    # takes it (power_law_rheology, moderate, with the default basis).
+    main([str(REAL / "force-save-JPK-3h.txt"), "--out", str(tmp_path / "set"), *COMMON])
+    d = run(tmp_path / "set", coarse_cache, tmp_path / "run", "diagnosis.design=false").diagnosis
+    hereditary = {"solid_relaxation", "power_law_rheology", "pore_pressure_relaxation"}
+    assert d["mismatch"]["detected"]
+    assert {entry["term"] for entry in d["left_out"]} & hereditary
