@@ -104,13 +104,24 @@ def test_a_calibration_given_scales_the_force_the_export_calibrated(tmp_path, un
         np.testing.assert_allclose(recordings.curves["force"], factor * force, rtol=1e-8)
 
 
-def test_a_multi_step_export_a_pause_of_unknown_hold_and_a_broken_row_are_refused_in_one_line(tmp_path, capsys):
+def test_a_multi_step_export_is_read_for_its_first_ramp_and_hold_saying_what_is_left_out(tmp_path, capsys):
+    time = np.linspace(0.0, DURATION, 50)
+    noise = np.random.default_rng(0).normal(0.0, 1e-12, 50)  # [N]
+    ramp = ("extend", "", time, TRAVEL * (1 - time / DURATION), 1e-8 * np.clip(2 * time / DURATION - 1, 0, 1) + noise)
+    hold = ("pause", "constant-height", time + DURATION + 0.01, np.zeros(50), 1e-8 + noise)
+    step = ("extend", "", time + 2 * DURATION, -0.1 * TRAVEL * time / DURATION, 2e-8 + noise)
+    write_export(tmp_path / "steps.txt", [ramp, hold, step, hold, step], unit="N")
+    main([str(tmp_path / "steps.txt"), "--out", str(tmp_path / "set"), *COMMON])
+    assert "as v2h (the 2 later steps and what follows (150 samples) not written)" in capsys.readouterr().out
+    curve = load_recordings(tmp_path / "set").curve("v2h")
+    assert curve["segment"].tolist() == ["approach"] * 50 + ["hold"] * 50
+
+
+def test_a_pause_of_unknown_hold_and_a_broken_row_are_refused_in_one_line(tmp_path, capsys):
     time = np.linspace(0.0, DURATION, 50)
     ramp = ("extend", "", time, TRAVEL * (1 - time / DURATION), np.zeros(50))
-    steps = [ramp, ("pause", "constant-height", time + 1, np.zeros(50), np.zeros(50)), ramp]
     unknown = [ramp, ("pause", "", time + 1, np.zeros(50), np.zeros(50))]
     for name, segments, words in (
-        ("steps.txt", steps, "steps.txt: 2 extend segments; ptwin reads one approach with its hold or creep"),
         ("unknown.txt", unknown, "unknown.txt: pause segment 1 held what the export does not say"),
         ("broken.txt", [ramp], "broken.txt: line 20 is not 5 numbers (the columns of segment extend)"),
     ):

@@ -141,6 +141,7 @@ def curve_rows(data, label: str, speed: float | None) -> tuple[pd.DataFrame, flo
         }
     )
     left = [f"the {name} ({int(np.sum(kind == name))} samples)" for name in dict.fromkeys(kind) if name not in KEPT]
+    left += [md[jpk_text.LEFT_OUT]] if jpk_text.LEFT_OUT in md else []
     return rows, float(base_speed), spring_constant, " and ".join(left)
 
 

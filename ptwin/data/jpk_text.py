@@ -9,7 +9,9 @@ segment's kind, columns, units, spring constant and sensitivity), then whitespac
 vertical deflection in whatever unit the export chose (N, m or V: times the spring constant, and the sensitivity).
 A pause is a hold where the instrument held the height (stress relaxation), a creep where it held the force (creep
 compliance), as its segment settings say; the approach speed is the extend's z travel over its duration, as
-afmformats reads it from JPK's own files.
+afmformats reads it from JPK's own files. A multi-step protocol (extend, pause, extend, pause, ...) is read for its
+first step, a ramp and hold of its own (the contract has one approach a curve); the later steps are said to be
+left out.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ MEASURED_HEIGHT = (
     "smoothedCapacitiveSensorHeight",
     "capacitiveSensorHeight",
 )
+LEFT_OUT = "left out"  # metadata: what of the file the curve does not hold, in words (afmformats has no such key)
 PAUSES = {"constant-height": "hold", "constant-force": "creep"}  # what the instrument held during a pause
 MODE_OF = {
     "hold": "stress-relaxation",
@@ -69,11 +72,11 @@ def load(path: Path, overrides: dict, segments_of: dict[str, tuple[str, ...]]) -
     blocks = _blocks(path)
     kinds = [_kind(header, path) for header, _ in blocks]
     extends = [i for i, kind in enumerate(kinds) if kind == "approach"]
-    if len(extends) != 1:
-        raise RecordingError(
-            f"{path}: {len(extends)} extend segments; ptwin reads one approach with its hold or creep a curve: "
-            "export each step as a curve of its own"
-        )
+    if not extends:
+        raise RecordingError(f"{path}: no extend segment; a curve needs its approach")
+    later = blocks[extends[1] :] if len(extends) > 1 else []
+    if later:  # a multi-step protocol: its first step is a ramp and hold (or creep) of its own
+        blocks, kinds = blocks[: extends[1]], kinds[: extends[1]]
     mode = next((MODE_OF[kind] for kind in kinds if kind in MODE_OF), "force-distance")
     order = segments_of[mode]
     if any(kind not in order for kind in kinds):
@@ -94,6 +97,10 @@ def load(path: Path, overrides: dict, segments_of: dict[str, tuple[str, ...]]) -
     speed = _approach_speed(header)
     if speed:
         metadata["speed approach"] = speed
+    if later:
+        samples = sum(len(rows) for _, rows in later)
+        steps = f"{len(extends) - 1} later step" + ("s" if len(extends) > 2 else "")
+        metadata[LEFT_OUT] = f"the {steps} and what follows ({samples} samples)"
     return [TextExport(columns, metadata)]
 
 
