@@ -26,8 +26,9 @@ from ptwin.data.noise import (
     trend_basis,
     with_std,
 )
-from ptwin.data.recordings import load_recordings, write_recordings
+from ptwin.data.recordings import RecordingError, load_recordings, write_recordings
 from ptwin.data.tails import chi_square_exceeded, fisher_exceeded, normal_exceeded, student_t_exceeded
+from ptwin.pipeline.prepare import prepare
 from ptwin.synth.simulator import Experiment, correlated_noise, simulate
 from tests.conftest import OPEN_DATA, needs_open_data, settings_for, simulated_set
 
@@ -286,3 +287,17 @@ def test_stationary_noise_is_rarely_taken_for_ringing(lag1, size):
     rng = np.random.default_rng(5)
     trimmed = sum(settled(correlated_noise(rng, size, 1.0, lag1), 50) > 0 for _ in range(300))
     assert trimmed <= 3
+
+
+def test_a_set_whose_baselines_hold_no_noise_is_refused_unless_its_noise_is_given(tmp_path, coarse_cache):
+    # A simulation without noise, or a force smoothed or exported to few digits: the baselines are flat to
+    # rounding, no correlation can be fitted (0/0) and every χ² would be over a σ of rounding: such a set read
+    # "284× the noise std" and unexplained, through a division by zero, before it was refused.
+    folder = simulated_set(tmp_path / "set", noise_std=0.0, z_start=-1.0e-6)  # baselines long enough to measure
+    settings = settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}")
+    flat = r"curve\(s\) v0.5, v4, v20, v80: the baseline before contact is flat to rounding"
+    with pytest.raises(RecordingError, match=flat):
+        prepare(settings, progress=lambda _: None)
+    meta = folder / "meta.yaml"
+    meta.write_text(meta.read_text() + "noise_std: 1.0e-11\n")
+    assert prepare(settings, progress=lambda _: None).noise_floor == pytest.approx(1e-11)

@@ -41,7 +41,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ptwin.data.noise import fit_correlation, model_inflation, robust_std, settled
+from ptwin.data.noise import fit_correlation, holds_noise, model_inflation, robust_std, settled
 from ptwin.data.tails import chi_square_exceeded, student_t_exceeded
 
 DEPARTURE = 5.0  # robust standard deviations above the first baseline where contact has begun
@@ -99,14 +99,17 @@ def estimate_baseline(z: np.ndarray, force: np.ndarray, spring_constant: float) 
     contact_z, root_shift = _onset_contacts(depth, excess, depth[min(guess, z.size - 1)])  # F = 0 there: z = w
     level = float(intercept + tilt * contact_z)
     onset = abs(float(z[min(guess, z.size - 1)]) - contact_z)
-    level_std = _level_std(z[free], excess[free], contact_z)
+    level_std = _level_std(z[free], excess[free], contact_z, float(np.ptp(force)))
     return Baseline(float(contact_z), level, float(tilt), level, level_std, onset, root_shift=root_shift)
 
 
-def _level_std(z: np.ndarray, noise: np.ndarray, contact_z: float) -> float:
+def _level_std(z: np.ndarray, noise: np.ndarray, contact_z: float, scale: float) -> float:
     """Standard error [N] of a line's value at ``contact_z`` fitted to ``noise`` at ``z``, under the
     noise's own correlation (white + AR(1), fitted on it): the white formula σ²(1/n + (z_c − z̄)²/Sxx)
-    times the inflation of a mean over the whole stretch."""
+    times the inflation of a mean over the whole stretch; 0 where ``noise`` is rounding of a force of range
+    ``scale`` [N] (``holds_noise``)."""
+    if not holds_noise(noise, scale):
+        return 0.0
     n, centre = noise.size, z.mean()
     leverage = 1.0 / n + (contact_z - centre) ** 2 / np.sum((z - centre) ** 2)
     share, memory, std = fit_correlation([noise], max(2, min(50, n // 3)))

@@ -52,6 +52,11 @@ MIN_RECORD = 30  # samples of a shorter baseline that still add to the set's poo
 BASELINE = "pre-contact baseline"
 SHORT_BASELINES = "pre-contact baselines, each shorter than 100 samples, pooled"
 SECOND_DIFFERENCES = "second differences of the curve (no baseline long enough)"
+SILENT = "nothing: the baseline before contact is flat to rounding"
+# A baseline whose scatter about its line is this fraction of its curve's force range or less holds rounding, not
+# noise (a simulation without noise, a force smoothed or exported to few digits): far below any instrument's
+# resolution (a 16–24-bit converter's step is 1e-5–1e-7 of its range), and no correlation can be fitted to it.
+ROUNDING = 1e-9
 RESIDUAL = "the hybrid twin's residual in contact (no baseline of 100 samples)"
 _MEMORIES = np.exp(-1.0 / np.geomspace(0.3, 300.0, 48))  # φ grid: correlation times 0.3–300 samples
 _SHARES = np.linspace(-0.5, 1.0, 61)  # c grid (anti-correlated cell noise has c·φ < 0)
@@ -326,10 +331,18 @@ def second_difference_std(force: np.ndarray) -> float:
     return robust_std(np.diff(force, 2)) / np.sqrt(6.0)
 
 
+def holds_noise(values: np.ndarray, scale: float) -> bool:
+    """Whether ``values`` [N] scatter by more than rounding of a force of range ``scale`` [N] (``ROUNDING``)."""
+    return float(np.std(values)) > ROUNDING * scale
+
+
 def curve_noise(time, z, force, baseline: np.ndarray, block: int) -> NoiseModel:
     """The noise of one curve: measured on its ``baseline`` samples (bool mask) if long enough,
     else σ from second differences of the whole curve, correlation unknown (white until pooled; a
-    baseline of ``MIN_RECORD`` samples or more is kept as a short record for the pool)."""
+    baseline of ``MIN_RECORD`` samples or more is kept as a short record for the pool). A baseline flat to
+    rounding gives σ 0 and no record (``SILENT``): there is no noise to measure."""
+    if baseline.sum() >= MIN_RECORD and not holds_noise(_detrended(z[baseline], force[baseline]), float(np.ptp(force))):
+        return NoiseModel(0.0, 0.0, 1.0, 0.0, SILENT, int(force.size))
     measured = baseline_noise(time[baseline], z[baseline], force[baseline], block)
     if measured is not None:
         return measured

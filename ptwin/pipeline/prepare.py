@@ -13,7 +13,7 @@ import torch
 
 from ptwin.data.evidence import SPOT_VARIATION, RateEffect, drag_from_baselines, rate_effect, spot_variation
 from ptwin.data.kinematics import CurveKinematics, curve_kinematics
-from ptwin.data.noise import NoiseModel, corrected, pooled
+from ptwin.data.noise import SILENT, NoiseModel, corrected, pooled
 from ptwin.data.recordings import APPROACH, Meta, RecordingError, RecordingSet, load_recordings
 from ptwin.data.relaxation import Relaxation, relaxations
 from ptwin.fitting.hybrid import ErrorNetwork, HybridTwin
@@ -121,6 +121,13 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     recordings = load_recordings(settings.data.path)
     meta = recordings.meta
     curves = curve_kinematics(recordings, settings.data.smoothing, settings.diagnosis.block)
+    silent = [c.curve for c in curves if c.noise.source == SILENT]
+    if silent:
+        raise RecordingError(
+            f"{recordings.path}: curve(s) {', '.join(silent)}: the baseline before contact is flat to rounding, no "
+            "noise to judge a fit by (a force simulated without noise, smoothed or exported to few digits); export "
+            "the raw force, or set noise_std in meta.yaml to the instrument's noise [N]"
+        )
     noise = pooled(
         [c.noise for c in curves],
         [max(int(c.in_contact.sum()), 1) for c in curves],
