@@ -35,10 +35,8 @@ MEASURED_HEIGHT = (
 )
 LEFT_OUT = "left out"  # metadata: what of the file the curve does not hold, in words (afmformats has no such key)
 PAUSES = {"constant-height": "hold", "constant-force": "creep"}  # what the instrument held during a pause
-MODE_OF = {
-    "hold": "stress-relaxation",
-    "creep": "creep-compliance",
-}  # a curve's imaging mode by what follows its approach
+# A curve's imaging mode by what follows its approach (force-distance where neither does).
+MODE_OF = {"hold": "stress-relaxation", "creep": "creep-compliance"}
 
 
 def is_text_export(path: Path) -> bool:
@@ -145,7 +143,7 @@ def _numbers(row: str, width: int) -> bool:
     """Whether ``row`` is ``width`` numbers."""
     fields = row.split()
     try:
-        [float(field) for field in fields]
+        np.array(fields, dtype=np.float64)
     except ValueError:
         return False
     return len(fields) == width
