@@ -28,6 +28,7 @@ def test_a_gel_without_fluid_force_has_its_plateaus_said_to_be_bounds(fitted_set
     # out near 0.1 m² and the summary read "the plateau permeability changes with speed by -0.12 m² per decade".
     # Here every curve's force is the elastic law alone (the model at K = 1e-7 m²): every plateau is a bound.
     prepared, base = fitted_set
+    assert base.settled  # the fit these plateaus are read against ended at an optimum, not at its step cap
     with torch.no_grad():
         elastic = prepared.make_model((), None, 1e-7)(prepared.samples)
     apparent = apparent_permeability(base.model, replace(prepared.samples, force=elastic), base.permeability)

@@ -178,3 +178,4 @@ def test_a_law_that_falls_with_depth_is_no_solids_and_its_fit_is_rejected(tmp_pa
     absurd.fluid.log_permeability.requires_grad_(True)
     fit = fit_physics(absurd, samples, torch.nonzero(samples.in_contact).squeeze(1), iterations=0)
     assert "falls by" in fit.violations["solid_viscosity"] and not fit.physical
+    assert not fit.settled  # no step taken: the cap, not the fit, ended it

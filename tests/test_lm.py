@@ -97,6 +97,18 @@ def test_a_step_limit_crosses_the_e_folds_in_accepted_steps_of_that_length_from_
     assert len(steps) < 23  # the unlimited run's steps (above)
 
 
+def test_a_run_says_whether_it_settled_or_ended_at_its_step_cap():
+    # The same 16 e-folds at two decades a step: three steps leave it falling, two hundred let it settle.
+    t = torch.linspace(0.5, 2.0, 50, dtype=torch.float64)
+    limit = torch.tensor([LOG_PERMEABILITY_STEP], dtype=torch.float64)
+    for steps, settled in ((3, False), (200, True)):
+        solver = LevenbergMarquardt(
+            lambda theta: (torch.exp(-theta[0]) - 1.0) * t, torch.tensor([16.0]).double(), step_limit=limit
+        )
+        solver.run(steps, tolerance=1e-12)
+        assert solver.settled is settled and int(solver.state["iteration"]) <= steps
+
+
 def _counted_decay_fit() -> tuple[LevenbergMarquardt, list]:
     """LM on a decay a·exp(−e^b·t) from a poor start (truth a = 2, b = −1.3), and the θ of each evaluation."""
     t = torch.linspace(0, 4, 200, dtype=torch.float64)

@@ -205,7 +205,7 @@ def diagnose(
     # Failed fits and fits whose terms do nothing say so here; non-physical ones are listed as rejected.
     notes = [*(notes or []), *pick.notes]
     notes += [f"{' + '.join(t) or 'base'}: {c.state}" for t, c in candidates.items() if c.without_effect]
-    notes += _permeability_notes(candidates[pick.chosen].fit, samples)
+    notes += _permeability_notes(candidates[pick.chosen].fit, samples) + _unsettled_notes(base, corrected)
     fit = _fit_table(samples, split, base, corrected, twin)
     rivals = _rivals(candidates, pick, s, held_out)
     unruled = [] if pick.unexplained else _not_ruled_out(candidates, chosen)
@@ -710,6 +710,19 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut |
     if verdict.reasons:
         sentence += f" Confidence {verdict.confidence}: " + "; ".join(verdict.reasons) + "."
     return sentence
+
+
+def _unsettled_notes(*read: Candidate) -> list[str]:
+    """A note for each fit the verdict reads (the base model's, the chosen one's) that LM left at its step cap with
+    χ² still falling (``PhysicsFit.settled``): its values and intervals are its last step's, not an optimum's."""
+    fits = {candidate.terms: candidate.fit for candidate in read if candidate.fit is not None}
+    return [
+        f"The fit of {' + '.join(terms) or 'the base model'} ended at its step cap ({fit.iterations} LM "
+        f"step{'s' if fit.iterations != 1 else ''}) with χ² still falling: its values and intervals are those of "
+        "its last step, not of an optimum; raise optim.physics_fit.iterations."
+        for terms, fit in fits.items()
+        if not fit.settled
+    ]
 
 
 def _permeability_notes(fit: PhysicsFit, samples: Samples) -> list[str]:

@@ -246,21 +246,21 @@ class LevenbergMarquardt:
         step promised no more than that: a larger damping only shortens the step and its promise, so the
         steps that would follow end where this one leaves θ, at a cost of one evaluation each (a power law
         at the edge of its range tried eleven of them). Where the normal equations could not be solved there
-        was no step: a larger damping is tried."""
+        was no step: a larger damping is tried. ``settled`` after the run: whether one of these ended it, not the
+        ``iterations`` cap."""
+        self.settled = False
         while int(self.state["iteration"]) < iterations:
             before = self.state["cost"].item()
             step = self.step()
             if callback is not None:
                 callback(step)
-            if step.accepted and before - step.cost <= max(tolerance * before, settled):
-                break
-            if (
-                step.predicted is not None
-                and not step.accepted
-                and step.predicted <= max(tolerance * step.cost, settled)
-            ):
-                break
-            if step.damping > 1e12:
+            promised = step.predicted is not None and not step.accepted
+            self.settled = (
+                (step.accepted and before - step.cost <= max(tolerance * before, settled))
+                or (promised and step.predicted <= max(tolerance * step.cost, settled))
+                or step.damping > 1e12
+            )
+            if self.settled:
                 break
         return self.theta
 

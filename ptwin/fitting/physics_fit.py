@@ -61,6 +61,8 @@ class PhysicsFit:
     reference_free: bool | None = None
     # term → χ² with that term taken out, the rest as fitted: the cost of the model one term smaller, here
     chi_square_without: dict[str, float] = field(default_factory=dict)
+    # LM stopped on its own criteria (``LevenbergMarquardt.run``), not at its step cap with χ² still falling
+    settled: bool = True
 
     @property
     def effective_samples(self) -> float:
@@ -185,6 +187,7 @@ def fit_physics(
         implausible=implausible,
         chi_square_without=without,
         reference_free=None if model.contact is None else bool(model.contact.reference.requires_grad),
+        settled=solver.settled,
     )
 
 
