@@ -1001,12 +1001,14 @@ def test_stage_two_recovers_a_concealed_viscosity(viscous_run):
 
 
 def test_a_fit_left_at_its_step_cap_is_said_to_be_no_optimum():
-    # A fit LM left at its step cap with χ² still falling (``PhysicsFit.settled``): its K and intervals are a
-    # step's, and the notes say so for each fit the verdict reads; a settled fit gets no note.
+    # A fit LM left at its step cap before it settled (``PhysicsFit.settled``): its K and intervals are a step's,
+    # and the notes say so for each fit the verdict reads; a settled fit gets no note.
     from ptwin.diagnosis.diagnose import _unsettled_notes
 
     base, pair = candidate((), 1500.0, 1.0), candidate(("solid_viscosity", "cantilever_drag"), 1100.0, 1.0)
     assert _unsettled_notes(base, pair) == []
     pair.fit.settled = False
     (note,) = _unsettled_notes(base, pair)
-    assert note.startswith("The fit of solid_viscosity + cantilever_drag ended at its step cap (1 LM step) with")
+    assert note.startswith(
+        "The fit of solid_viscosity + cantilever_drag ended at its step cap (1 LM step) before it settled"
+    )

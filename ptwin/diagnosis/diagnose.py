@@ -713,13 +713,14 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut |
 
 
 def _unsettled_notes(*read: Candidate) -> list[str]:
-    """A note for each fit the verdict reads (the base model's, the chosen one's) that LM left at its step cap with
-    χ² still falling (``PhysicsFit.settled``): its values and intervals are its last step's, not an optimum's."""
+    """A note for each fit the verdict reads (the base model's, the chosen one's) that LM left at its step cap before
+    its stopping rules were met (``PhysicsFit.settled``): its values and intervals are its last step's, not an
+    optimum's."""
     fits = {candidate.terms: candidate.fit for candidate in read if candidate.fit is not None}
     return [
         f"The fit of {' + '.join(terms) or 'the base model'} ended at its step cap ({fit.iterations} LM "
-        f"step{'s' if fit.iterations != 1 else ''}) with χ² still falling: its values and intervals are those of "
-        "its last step, not of an optimum; raise optim.physics_fit.iterations."
+        f"step{'s' if fit.iterations != 1 else ''}) before it settled: its values and intervals are those of its "
+        "last step, not of an optimum; raise optim.physics_fit.iterations."
         for terms, fit in fits.items()
         if not fit.settled
     ]

@@ -61,7 +61,7 @@ class PhysicsFit:
     reference_free: bool | None = None
     # term → χ² with that term taken out, the rest as fitted: the cost of the model one term smaller, here
     chi_square_without: dict[str, float] = field(default_factory=dict)
-    # LM stopped on its own criteria (``LevenbergMarquardt.run``), not at its step cap with χ² still falling
+    # LM stopped on its own rules (``LevenbergMarquardt.run``), not at its step cap
     settled: bool = True
 
     @property
