@@ -212,9 +212,9 @@ def _approach_speed(header: dict[str, str]) -> float | None:
     """The extend's z travel over its duration [m/s] (segmented settings; relative ones: z start over the extend
     time), None where the header lacks them."""
     index = header.get("segmentIndex")
-    keys = (f"force-settings.segment.{index}.{key}" for key in ("z-start", "z-end", "duration"))
+    segmented = tuple(f"force-settings.segment.{index}.{key}" for key in ("z-start", "z-end", "duration"))
     relative = ("force-settings.relative-z-start", "force-settings.relative-z-end", "force-settings.extend-scan-time")
-    for start, end, duration in (tuple(keys), relative):
+    for start, end, duration in (segmented, relative):
         if start in header and end in header and duration in header and float(header[duration]) > 0:
             return abs(float(header[start]) - float(header[end])) / float(header[duration])
     return None

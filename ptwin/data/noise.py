@@ -341,12 +341,12 @@ def curve_noise(time, z, force, baseline: np.ndarray, block: int) -> NoiseModel:
     else σ from second differences of the whole curve, correlation unknown (white until pooled; a
     baseline of ``MIN_RECORD`` samples or more is kept as a short record for the pool). A baseline flat to
     rounding gives σ 0 and no record (``SILENT``): there is no noise to measure."""
-    if baseline.sum() >= MIN_RECORD and not holds_noise(_detrended(z[baseline], force[baseline]), float(np.ptp(force))):
+    short = _detrended(z[baseline], force[baseline]) if baseline.sum() >= MIN_RECORD else None
+    if short is not None and not holds_noise(short, float(np.ptp(force))):
         return NoiseModel(0.0, 0.0, 1.0, 0.0, SILENT, int(force.size))
     measured = baseline_noise(time[baseline], z[baseline], force[baseline], block)
     if measured is not None:
         return measured
-    short = _detrended(z[baseline], force[baseline]) if baseline.sum() >= MIN_RECORD else None
     std = second_difference_std(force)
     return NoiseModel(std, 0.0, 1.0, 0.0, SECOND_DIFFERENCES, int(force.size), short=short, differences=std)
 
