@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ptwin.data.import_afm import main
+from ptwin.data.import_afm import _unused, main
 from ptwin.data.recordings import load_recordings
 from ptwin.pipeline.prepare import UnsupportedSet
 from tests.conftest import run
@@ -193,6 +193,18 @@ def test_files_of_different_cantilevers_are_refused(tmp_path, capsys):
         capsys.readouterr().err.strip(),
     )
     assert not (tmp_path / "set").exists()
+
+
+def test_replicates_are_named_as_the_contract_names_them_and_never_take_a_creeps_id():
+    taken = set()
+    for _ in range(3):
+        taken.add(_unused("v5", taken))
+    assert taken == {"v5", "v5b", "v5c"}
+    taken = {"v10c"}  # a creep at 10 µm/s
+    for _ in range(3):
+        taken.add(_unused("v10", taken))
+    assert taken == {"v10c", "v10", "v10b", "v10d"}
+    assert _unused("v2", {"v2", *(f"v2{letter}" for letter in "bcdefghijklmnopqrstuvwxyz")}) == "v2bb"
 
 
 class MapCurve:

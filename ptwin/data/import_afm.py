@@ -26,7 +26,9 @@ uniform over travel / approach speed (an approach alone).
 from __future__ import annotations
 
 import argparse
+import itertools
 import logging
+import string
 import sys
 from pathlib import Path
 
@@ -181,6 +183,14 @@ def import_maps(files: list[Path], out: Path, meta: dict, speed: float | None, o
     return failures
 
 
+def _unused(curve: str, taken: set[str]) -> str:
+    """``curve``, or where a curve of the set has that id, a replicate's: the first of ``curve`` + b, c, …, z, then
+    + bb, bc, … that none has (the contract's v5, v5b, v5c)."""
+    letters = string.ascii_lowercase[1:]
+    ids = (curve + "".join(p) for n in itertools.count() for p in itertools.product(letters, repeat=n))
+    return next(i for i in ids if i not in taken)
+
+
 def write_set(out: Path, curves: dict[str, tuple], meta: dict, position: tuple[float, float] | None = None) -> str:
     """Write the recording set of ``curves`` ({source: ``curve_rows``}) to ``out``, check it reads back, and
     say which file became which curve and what was not written. A curve is named by its speed and what
@@ -188,9 +198,7 @@ def write_set(out: Path, curves: dict[str, tuple], meta: dict, position: tuple[f
     frames, springs, notes = [], {}, []
     for source, (rows, base_speed, spring_constant, left) in curves.items():
         after = [SUFFIX[kind] for kind in dict.fromkeys(rows["segment"]) if kind in SUFFIX]
-        curve = f"v{base_speed * 1e6:.3g}" + "".join(after)
-        while any(frame["curve"].iloc[0] == curve for frame in frames):
-            curve += "b"
+        curve = _unused(f"v{base_speed * 1e6:.3g}" + "".join(after), {frame["curve"].iloc[0] for frame in frames})
         frames.append(rows.assign(curve=curve)[["curve", "base_speed", "time", "z", "force", "segment"]])
         springs[Path(source).name] = spring_constant
         notes.append(f"{Path(source).name} as {curve}" + (f" ({left} not written)" if left else ""))
