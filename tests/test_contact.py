@@ -41,6 +41,24 @@ def test_an_approach_that_starts_ringing_has_its_baseline_read_where_it_has_sett
     assert baseline.offset == pytest.approx(3e-10 * offset + 5e-4 * (baseline.contact_z - 2e-7 * error), abs=1e-11)
 
 
+@pytest.mark.parametrize(("setting", "z_start"), [({}, -0.2e-6), (SOFT_CANTILEVER, -0.1e-6)])
+def test_a_baseline_shorter_than_a_fifth_of_the_travel_is_read_before_the_onset(setting, z_start):
+    # The demo's approach (0.2 µm of baseline, 4 µm of travel past contact) with its contact to estimate: the first
+    # fifth of the travel reached 0.64 µm into contact and a line through it followed the force, so the contact was
+    # read 405 nm late and a level of 24 nN (80× the noise) removed. A soft cantilever's short baseline the same.
+    experiment = Experiment(
+        **{**setting, "base_speeds": (5e-6,), "z_start": z_start, "contact_point": "estimate", "contact_error": 1e-7}
+        | {"baseline_offset": 3e-10, "tilt": 1e-3}
+    )
+    _, curves = simulate(experiment)
+    _, offset, error = np.random.default_rng([0, 1]).standard_normal(3)
+    z, force = curves["z"].to_numpy(), curves["force"].to_numpy()
+    baseline = estimate_baseline(z, force, experiment.spring_constant)
+    assert baseline.contact_z == pytest.approx(1e-7 * error, abs=10e-9)
+    level = 3e-10 * offset + 1e-3 * (baseline.contact_z - 1e-7 * error)
+    assert baseline.offset == pytest.approx(level, abs=experiment.noise_std)
+
+
 def test_levels_are_kept_as_drag_only_where_they_rise_with_speed_beyond_free_offsets():
     # Five curves, levels σ = 0.2 nN apart from their line. Free offsets of 1 nN's spread, drawn 2000 times: how
     # often they pass for drag (one level plus b·speed within χ², b beyond t(3)'s 99%) is the stated 1% at most;
