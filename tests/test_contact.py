@@ -1,9 +1,11 @@
 """Estimated contact points and baselines against the simulator's known recording errors."""
 
+import math
+
 import numpy as np
 import pytest
 
-from ptwin.data.contact import estimate_baseline, levels_with_speed
+from ptwin.data.contact import _line_onset, estimate_baseline, levels_with_speed
 from ptwin.synth.presets import SOFT_CANTILEVER
 from ptwin.synth.simulator import Experiment, simulate
 
@@ -57,6 +59,23 @@ def test_a_baseline_shorter_than_a_fifth_of_the_travel_is_read_before_the_onset(
     assert baseline.contact_z == pytest.approx(1e-7 * error, abs=10e-9)
     level = 3e-10 * offset + 1e-3 * (baseline.contact_z - 1e-7 * error)
     assert baseline.offset == pytest.approx(level, abs=experiment.noise_std)
+
+
+def test_the_onset_is_sought_over_the_whole_approach_and_a_snap_to_contact_leaves_the_fifth_alone():
+    # A long baseline puts the onset past the middle of the approach's depths: the scan spans them all.
+    experiment = Experiment(base_speeds=(5e-6,), z_start=-3e-6, contact_point="estimate", contact_error=1e-7)
+    _, curves = simulate(experiment)
+    _, _, error = np.random.default_rng([0, 1]).standard_normal(3)
+    z, force = curves["z"].to_numpy(), curves["force"].to_numpy()
+    assert _line_onset(z, force, experiment.spring_constant) == pytest.approx(1e-7 * error, abs=20e-9)
+    # Like JPK approaches of afmToolkit's (72 nm of travel, a snap of −0.6 nN, then 1.5 nN in 8 nm, steeper than
+    # the 0.157 N/m cantilever): no line beside a Hertz onset fits (w runs back up the rise), and the first fifth,
+    # all baseline, is kept, not refused as "fewer than 10 samples before the force's onset at z = −0 m".
+    z = np.linspace(0.0, 72e-9, 200)
+    force = 1e-11 * np.random.default_rng(0).standard_normal(z.size) - 6e-10 * ((z > 56e-9) & (z < 64e-9))
+    force += 1.5e-9 * (np.clip(z - 64e-9, 0.0, None) / 8e-9) ** 1.5
+    assert _line_onset(z, force, 0.157) == math.inf
+    assert 0.0 < estimate_baseline(z, force, 0.157).contact_z < 64e-9
 
 
 def test_levels_are_kept_as_drag_only_where_they_rise_with_speed_beyond_free_offsets():

@@ -184,7 +184,7 @@ def _onset_contacts(depth: np.ndarray, force: np.ndarray, guess: float) -> tuple
 def _line_onset(z: np.ndarray, force: np.ndarray, spring_constant: float) -> float:
     """The z [m] of the contact where a line (the baseline's level and tilt) beside a Hertz onset c·(w − w0)^1.5
     fits the approach best, up to half its largest force (w = z − F/k_s, F from the first samples' level): the
-    onset found with no stretch of the travel taken for baseline first."""
+    onset found with no stretch of the travel taken for baseline first; inf where no onset of that shape fits."""
     level = force - np.median(force[:10])
     depth, f = _to_half_force(z - level / spring_constant, level)
     travel = z[: depth.size] - z[0]
@@ -194,7 +194,9 @@ def _line_onset(z: np.ndarray, force: np.ndarray, spring_constant: float) -> flo
         flat = np.broadcast_to(np.ones_like(depth), hertz.shape)
         return _misfit(f, flat, np.broadcast_to(travel, hertz.shape), hertz, signed=2)
 
-    onset = _scan(depth, misfit, float(depth[0]))
+    onset = _scan(depth, misfit, 0.5 * float(depth[0] + depth[-1]))  # the coarse grid spans the depths
+    if not np.isfinite(misfit(np.array([onset]))[0]):  # no onset of this shape (a snap to contact outweighs it)
+        return math.inf
     return float(z[min(int(np.searchsorted(np.maximum.accumulate(depth), onset)), depth.size - 1)])
 
 
