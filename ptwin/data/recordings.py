@@ -32,6 +32,9 @@ SPEED_RULE = {
     "retract": "< 0 (out of it)",
 }
 MIN_SAMPLES = 20
+# Samples in a row at exactly the largest force of the approach and hold: a deflection past the detector's range
+# reads as its last value, and no sample holds its force to the last digit while it is pressed.
+SATURATED = 10
 # Magnitudes no AFM indentation reaches in SI: a value past them is in other units.
 _PLAUSIBLE = {"z": (1e-3, "m (micrometres?)"), "force": (1e-3, "N (nanonewtons?)"), "base_speed": (1e-2, "m/s (µm/s?)")}
 
@@ -238,6 +241,7 @@ def _check_curve(file: Path, rows: pd.DataFrame, start: int, meta: Meta) -> None
             f"{file}: row {row + 2}, curve {curve!r}: time does not increase; sort the curve by time or fix the row"
         )
     _check_segments(file, rows, start)
+    _check_saturated(file, rows, start)
     depth = rows["z"].to_numpy() - rows["force"].to_numpy() / meta.spring_constant
     if depth.max() >= meta.sample_thickness:
         row = start + int(depth.argmax())
@@ -253,11 +257,36 @@ def _check_curve(file: Path, rows: pd.DataFrame, start: int, meta: Meta) -> None
         )
 
 
+def _segment_names(rows: pd.DataFrame) -> np.ndarray:
+    """Each row's segment; absent, every row an approach."""
+    return rows["segment"].to_numpy() if "segment" in rows else np.full(len(rows), SEGMENTS[0])
+
+
+def _check_saturated(file: Path, rows: pd.DataFrame, start: int) -> None:
+    """No ``SATURATED`` samples in a row at the largest force of the approach and hold, above where it began."""
+    names = _segment_names(rows)
+    pressed = np.flatnonzero(np.isin(names, SEGMENTS[:CREEP]))
+    force = rows["force"].to_numpy()[pressed]
+    if force.size == 0 or force.max() <= force[0]:
+        return
+    edges = np.diff(np.r_[0, (force == force.max()).astype(int), 0])
+    begins, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    longest = int(np.argmax(ends - begins))
+    if ends[longest] - begins[longest] >= SATURATED:
+        first, last = (start + int(pressed[i]) + 2 for i in (begins[longest], ends[longest] - 1))
+        curve, largest = rows["curve"].iloc[0], force.max()
+        raise RecordingError(
+            f"{file}: rows {first}–{last}, curve {curve!r}: the force stays at {largest:.6g} N, its largest, to the "
+            "last digit while the probe presses: the detector saturated; record with a lower setpoint (trigger "
+            "force), or leave the curve out"
+        )
+
+
 def _check_segments(file: Path, rows: pd.DataFrame, start: int) -> None:
     """Segments in time order (approach, hold, creep, retract), each contiguous, at one base speed: > 0 on the
     approach, 0 in a hold or a creep, < 0 on the retract."""
     curve = rows["curve"].iloc[0]
-    names = rows["segment"].to_numpy() if "segment" in rows else np.full(len(rows), SEGMENTS[0])
+    names = _segment_names(rows)
     order = np.array([SEGMENTS.index(name) for name in names])
     if (np.diff(order) < 0).any():
         row = start + int(np.argmax(np.diff(order) < 0)) + 1
