@@ -187,12 +187,14 @@ def _line_onset(z: np.ndarray, force: np.ndarray, spring_constant: float) -> flo
     onset found with no stretch of the travel taken for baseline first; inf where no onset of that shape fits."""
     level = force - np.median(force[:10])
     depth, f = _to_half_force(z - level / spring_constant, level)
-    travel = z[: depth.size] - z[0]
+    # The line is the same for every candidate: fitted beside the onset, it is the onset fitted to what the line
+    # leaves of force and shape alike (Frisch–Waugh), one shape a candidate instead of three.
+    line = np.linalg.qr(np.column_stack([np.ones_like(depth), z[: depth.size] - z[0]]))[0]
+    f = f - line @ (line.T @ f)
 
     def misfit(candidates: np.ndarray) -> np.ndarray:
         hertz = np.clip(depth[None, :] - candidates[:, None], 0.0, None) ** 1.5
-        flat = np.broadcast_to(np.ones_like(depth), hertz.shape)
-        return _misfit(f, flat, np.broadcast_to(travel, hertz.shape), hertz, signed=2)
+        return _misfit(f, hertz - (hertz @ line) @ line.T)
 
     onset = _scan(depth, misfit, 0.5 * float(depth[0] + depth[-1]))  # the coarse grid spans the depths
     if not np.isfinite(misfit(np.array([onset]))[0]):  # no onset of this shape (a snap to contact outweighs it)
@@ -229,10 +231,10 @@ def _onset_misfit(w: np.ndarray, f: np.ndarray, candidates: np.ndarray, with_roo
     return np.minimum.reduce([_misfit(f, hertz), _misfit(f, root), _misfit(f, hertz, root)])
 
 
-def _misfit(f: np.ndarray, *shapes: np.ndarray, signed: int = 0) -> np.ndarray:
+def _misfit(f: np.ndarray, *shapes: np.ndarray) -> np.ndarray:
     """Σ (f − Σ_k c_k·shape_k)² for each row of the shapes (one a candidate contact), the c_k by least squares;
-    inf where a c_k is not positive (no force grows from a contact by pulling; the first ``signed`` shapes, a
-    baseline's, take either sign) or the shapes do not determine them (a contact past every sample)."""
+    inf where a c_k is not positive (no force grows from a contact by pulling) or the shapes do not determine
+    them (a contact past every sample)."""
     design = np.stack(shapes, axis=-1)  # (candidates, samples, shapes)
     norm = np.sqrt(np.einsum("csk,csk->ck", design, design))
     usable = np.all(norm > 0, axis=1)
@@ -243,5 +245,5 @@ def _misfit(f: np.ndarray, *shapes: np.ndarray, signed: int = 0) -> np.ndarray:
     coefficients = np.linalg.solve(gram, np.einsum("csk,s->ck", design, f)[..., None])[..., 0]
     residual = f[None, :] - np.einsum("csk,ck->cs", design, coefficients)
     misfit = np.einsum("cs,cs->c", residual, residual)
-    misfit[~usable | np.any(coefficients[:, signed:] <= 0, axis=1)] = np.inf
+    misfit[~usable | np.any(coefficients <= 0, axis=1)] = np.inf
     return misfit
