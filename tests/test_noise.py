@@ -3,6 +3,7 @@
 from dataclasses import replace
 
 import numpy as np
+import pandas as pd
 import pytest
 import scipy.signal
 import scipy.stats
@@ -301,3 +302,21 @@ def test_a_set_whose_baselines_hold_no_noise_is_refused_unless_its_noise_is_give
     meta = folder / "meta.yaml"
     meta.write_text(meta.read_text() + "noise_std: 1.0e-11\n")
     assert prepare(settings, progress=lambda _: None).noise_floor == pytest.approx(1e-11)
+
+
+def test_a_curve_whose_noise_reads_zero_off_its_second_differences_is_refused(tmp_path, coarse_cache):
+    # A detector stuck once the probe pressed, on a curve whose baseline is too short to read its noise on: its
+    # second differences are mostly zero, the robust σ read off them 0, and the base model's fit divided by it
+    # ("the model or its derivatives are not finite … check the probe radius, spring constant and sample
+    # thickness", naming no curve) before it was refused.
+    folder = simulated_set(tmp_path / "set")
+    table = pd.read_csv(folder / "curves.csv")
+    stuck = (table["curve"] == "v4") & (table["z"] > 0)
+    table.loc[stuck, "force"] = table.loc[stuck, "force"].iloc[0]
+    table.to_csv(folder / "curves.csv", index=False)
+    settings = settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}")
+    with pytest.raises(RecordingError, match=r"curve\(s\) v4: half its second differences or more are zero"):
+        prepare(settings, progress=lambda _: None)
+    meta = folder / "meta.yaml"
+    meta.write_text(meta.read_text() + "noise_std: 1.0e-10\n")
+    assert prepare(settings, progress=lambda _: None).noise_floor == pytest.approx(1e-10)

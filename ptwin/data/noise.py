@@ -52,7 +52,9 @@ MIN_RECORD = 30  # samples of a shorter baseline that still add to the set's poo
 BASELINE = "pre-contact baseline"
 SHORT_BASELINES = "pre-contact baselines, each shorter than 100 samples, pooled"
 SECOND_DIFFERENCES = "second differences of the curve (no baseline long enough)"
-SILENT = "nothing: the baseline before contact is flat to rounding"
+NOTHING = "nothing: "  # the source of a noise model with no noise to read (σ 0): a fit cannot be judged by it
+SILENT = NOTHING + "the baseline before contact is flat to rounding"
+STUCK = NOTHING + "half its second differences or more are zero (read for its noise: its baseline is too short)"
 # A baseline whose scatter about its line is this fraction of its curve's force range or less holds rounding, not
 # noise (a simulation without noise, a force smoothed or exported to few digits): far below any instrument's
 # resolution (a 16–24-bit converter's step is 1e-5–1e-7 of its range), and no correlation can be fitted to it.
@@ -340,7 +342,9 @@ def curve_noise(time, z, force, baseline: np.ndarray, block: int) -> NoiseModel:
     """The noise of one curve: measured on its ``baseline`` samples (bool mask) if long enough,
     else σ from second differences of the whole curve, correlation unknown (white until pooled; a
     baseline of ``MIN_RECORD`` samples or more is kept as a short record for the pool). A baseline flat to
-    rounding gives σ 0 and no record (``SILENT``): there is no noise to measure."""
+    rounding gives σ 0 and no record (``SILENT``): there is no noise to measure; so does a curve whose second
+    differences are mostly zero (``STUCK``: a detector stuck, or a force quantised coarser than its noise), whose
+    robust σ is 0 (read as it was, a stuck curve's χ² divided by zero)."""
     short = _detrended(z[baseline], force[baseline]) if baseline.sum() >= MIN_RECORD else None
     if short is not None and not holds_noise(short, float(np.ptp(force))):
         return NoiseModel(0.0, 0.0, 1.0, 0.0, SILENT, int(force.size))
@@ -348,6 +352,8 @@ def curve_noise(time, z, force, baseline: np.ndarray, block: int) -> NoiseModel:
     if measured is not None:
         return measured
     std = second_difference_std(force)
+    if not std > ROUNDING * float(np.ptp(force)):
+        return NoiseModel(0.0, 0.0, 1.0, 0.0, STUCK, int(force.size))
     return NoiseModel(std, 0.0, 1.0, 0.0, SECOND_DIFFERENCES, int(force.size), short=short, differences=std)
 
 

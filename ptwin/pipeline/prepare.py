@@ -13,7 +13,7 @@ import torch
 
 from ptwin.data.evidence import SPOT_VARIATION, RateEffect, drag_from_baselines, rate_effect, spot_variation
 from ptwin.data.kinematics import CurveKinematics, curve_kinematics
-from ptwin.data.noise import SILENT, NoiseModel, corrected, pooled
+from ptwin.data.noise import NOTHING, NoiseModel, corrected, pooled
 from ptwin.data.recordings import APPROACH, Meta, RecordingError, RecordingSet, load_recordings
 from ptwin.data.relaxation import Relaxation, relaxations
 from ptwin.fitting.hybrid import ErrorNetwork, HybridTwin
@@ -121,13 +121,7 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     recordings = load_recordings(settings.data.path)
     meta = recordings.meta
     curves = curve_kinematics(recordings, settings.data.smoothing, settings.diagnosis.block)
-    silent = [c.curve for c in curves if c.noise.source == SILENT]
-    if silent:
-        raise RecordingError(
-            f"{recordings.path}: curve(s) {', '.join(silent)}: the baseline before contact is flat to rounding, no "
-            "noise to judge a fit by (a force simulated without noise, smoothed or exported to few digits); export "
-            "the raw force, or set noise_std in meta.yaml to the instrument's noise [N]"
-        )
+    _check_noise(recordings, curves)
     noise = pooled(
         [c.noise for c in curves],
         [max(int(c.in_contact.sum()), 1) for c in curves],
@@ -168,6 +162,21 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     evidence = (_spot_note(curves), drag_from_baselines(curves), rate.sentence() if rate else None)
     notes += [sentence for sentence in evidence if sentence] + [r.sentence() for r in held]
     return Prepared(recordings, curves, basis, samples, split, factory, noise, fitted, notes, rate, held)
+
+
+def _check_noise(recordings: RecordingSet, curves: list[CurveKinematics]) -> None:
+    """No curve whose noise reads σ 0 (``ptwin.data.noise.NOTHING``): every χ² would divide by it."""
+    silent: dict[str, list[str]] = {}
+    for curve in curves:
+        if curve.noise.source.startswith(NOTHING):
+            silent.setdefault(curve.noise.source.removeprefix(NOTHING), []).append(curve.curve)
+    if silent:
+        why = "; ".join(f"curve(s) {', '.join(names)}: {reason}" for reason, names in silent.items())
+        raise RecordingError(
+            f"{recordings.path}: {why}: no noise to judge a fit by (a force simulated without noise, a detector "
+            "stuck, smoothed or exported to few digits); export the raw force, leave such a curve out, or set "
+            "noise_std in meta.yaml to the instrument's noise [N]"
+        )
 
 
 def _fitted_curves(recordings: RecordingSet, curves, reference, law: ReferenceCurve):
