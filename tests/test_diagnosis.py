@@ -319,6 +319,8 @@ def ten_samples():
             "in_contact": torch.ones(10, dtype=torch.bool),
             "pins_contact": torch.zeros(10, dtype=torch.bool),
             "noise_floor": torch.ones(10),
+            "curve": torch.zeros(10, dtype=torch.long),
+            "line_sums": torch.zeros(10, 3),  # no baseline line removed (contacts known)
         },
     )()
     return samples, Split(torch.arange(5), torch.arange(5, 8), torch.arange(8, 10))

@@ -68,6 +68,9 @@ class Baseline:
     onset: float = math.nan  # travel from the contact to where the force leaves the first baseline for good [m]
     common: bool = False  # the set's common level was removed (the levels are one level plus drag)
     root_shift: float = 0.0  # how much later the contact is where the onset is Hertz beside a √w force [m]
+    # (n, Σt, Σt²) of the travel t from the contact [m] of the samples the line was fitted to: its (level, tilt)
+    # known to precision [[n, Σt], [Σt, Σt²]]/σ² (white noise), what ``ptwin.fitting.baseline_line`` carries
+    line_sums: tuple[float, float, float] | None = None
 
     def with_offset(self, offset: float) -> Baseline:
         """This baseline with the set's common level ``offset`` [N] removed at the contact instead."""
@@ -110,7 +113,11 @@ def estimate_baseline(z: np.ndarray, force: np.ndarray, spring_constant: float) 
     level = float(intercept + tilt * contact_z)
     onset = abs(float(z[min(guess, z.size - 1)]) - contact_z)
     level_std = _level_std(z[free], excess[free], contact_z, float(np.ptp(force)))
-    return Baseline(float(contact_z), level, float(tilt), level, level_std, onset, root_shift=root_shift)
+    travel = z[free] - contact_z
+    sums = (float(travel.size), float(travel.sum()), float(np.square(travel).sum()))
+    return Baseline(
+        float(contact_z), level, float(tilt), level, level_std, onset, root_shift=root_shift, line_sums=sums
+    )
 
 
 def _level_std(z: np.ndarray, noise: np.ndarray, contact_z: float, scale: float) -> float:

@@ -35,7 +35,7 @@ from ptwin.diagnosis.null import (
 from ptwin.diagnosis.words import MATERIAL, finite_or_none, summarise, times_better
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import rmse_of
-from ptwin.fitting.physics_fit import PhysicsFit, held_range, rmse
+from ptwin.fitting.physics_fit import PhysicsFit, fitted_difference, held_range, rmse
 from ptwin.fitting.pointwise import ApparentPermeability
 from ptwin.fitting.split import Split
 from ptwin.physics.elastic import ReferenceCurve
@@ -198,8 +198,7 @@ def diagnose(
         # with a strain-dependent K at half p09's values: no single kept, the pair unfitted, 112 BIC below the best).
         candidates, evidence, pick = weigh(candidates)
     base = candidates[()]
-    with torch.no_grad():
-        base_residual = base.fit.model(samples)[seen] - samples.force[seen]
+    base_residual = fitted_difference(base.fit.model, samples, split.train)[seen]
     where = locate(samples, base_residual, seen, s.block, test) if pick.structured else []
     chosen, corrected = pick.chosen, candidates[pick.chosen]
     # Failed fits and fits whose terms do nothing say so here; non-physical ones are listed as rejected.

@@ -30,12 +30,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from ptwin.diagnosis.locate import pooled_whiteness
 from ptwin.diagnosis.null import StructureTest, TermEvidence, term_evidence
 from ptwin.fitting.lm import FitError
-from ptwin.fitting.physics_fit import PhysicsFit, fit_from, fit_with_starts, kept_first
+from ptwin.fitting.physics_fit import PhysicsFit, fit_from, fit_with_starts, fitted_difference, kept_first
 from ptwin.fitting.split import Split
 from ptwin.physics.samples import Samples
 
@@ -250,8 +249,7 @@ def _candidate(subset, fit, make_model, samples, split, judged, iterations, bloc
     except FitError as error:
         return Candidate(subset, None, math.inf, math.inf, str(error))
     seen, pins = judged
-    with torch.no_grad():
-        difference = fit.model(samples) - samples.force  # one evaluation for every residual below
+    difference = fitted_difference(fit.model, samples, split.train)  # one evaluation for every residual below
     scaled, pinning = ((difference[i] / samples.noise_floor[i]).cpu().numpy() for i in (seen, pins))
     whiteness = pooled_whiteness(samples, difference[seen], seen, block)
     val_rmse = difference[split.val].square().mean().sqrt().item()  # ``physics_fit.rmse`` on split.val

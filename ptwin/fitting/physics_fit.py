@@ -17,6 +17,7 @@ import torch
 from torch import nn
 
 from ptwin.data.tails import chi_square_exceeded
+from ptwin.fitting.baseline_line import BaselineLines, line_projection
 from ptwin.fitting.lm import FitError, LevenbergMarquardt, ParameterVector, covariance, evaluated_at
 from ptwin.physics.model import PERMEABILITY, PLAUSIBLE_PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
@@ -98,12 +99,24 @@ def scaled_residual(model, samples: Samples, index: torch.Tensor, also: tuple[st
     ``also`` (one a fit holds, refitted in a profile)."""
     vector = ParameterVector(model, [n for n, p in model.named_parameters() if p.requires_grad] + list(also))
     force, noise = samples.force[index], samples.noise_floor[index]
+    project = line_projection(samples, index)
 
     def residual(theta):
         predicted = evaluated_at(model, vector.as_dict(theta), samples)
-        return (predicted[index] - force) / noise
+        return project((predicted[index] - force) / noise)
 
     return vector, residual
+
+
+def fitted_difference(model: ForceModel, samples: Samples, index: torch.Tensor) -> torch.Tensor:
+    """model − measured at every sample [N], less the removed baselines' line errors that a fit to
+    ``samples[index]`` implies (``BaselineLines.fitted``): the residual that fit minimised, and its continuation."""
+    with torch.no_grad():
+        difference = model(samples) - samples.force
+        lines = BaselineLines.of(samples, index)
+        if lines is None:
+            return difference
+        return difference + samples.noise_floor * lines.fitted(difference[index] / samples.noise_floor[index])
 
 
 def rmse(model: ForceModel, samples: Samples, index: torch.Tensor) -> float:
@@ -276,9 +289,10 @@ def _without_term(
     finally:
         model.terms = terms
     noise = samples.noise_floor[index]
+    project = line_projection(samples, index)
     with torch.no_grad():
-        chi_square = ((without - samples.force)[index] / noise).square().sum().item()
-        change = ((fitted - without)[index] / noise).square().sum().item()
+        chi_square = project((without - samples.force)[index] / noise).square().sum().item()
+        change = project((fitted - without)[index] / noise).square().sum().item()
     limit = terms[name].degenerate()
     if limit:
         return limit, chi_square

@@ -34,6 +34,11 @@ class Samples:
     nominal_speed: torch.Tensor | None = None  # the curve's approach speed [m/s] (None: base_speed)
     pins_contact: torch.Tensor | None = None  # bool: pre-contact samples fitted (``CurveKinematics``; None: none)
     curve_inflation: torch.Tensor | None = None  # κ² of each sample's curve for the whiteness test (None: the set's)
+    # The baseline line removed from each sample's curve, whose error a fit carries (``ptwin.fitting.baseline_line``):
+    travel: torch.Tensor | None = None  # z from the estimated contact [m] (0 where no line was removed)
+    line_sums: torch.Tensor | None = None  # (S, 3): (n, Σt, Σt²) of the line's samples (zeros: no line)
+    own_level: torch.Tensor | None = None  # bool: the curve's own level was removed (not the set's common one)
+    reference_line: tuple[float, float, float] | None = None  # the reference curve's line sums (the law's error)
 
     def __post_init__(self):
         if self.segment is None:
@@ -44,6 +49,12 @@ class Samples:
             self.pins_contact = torch.zeros_like(self.in_contact)
         if self.curve_inflation is None:
             self.curve_inflation = torch.full_like(self.time, self.noise_inflation)
+        if self.travel is None:
+            self.travel = torch.zeros_like(self.time)
+        if self.line_sums is None:
+            self.line_sums = torch.zeros(self.time.numel(), 3, dtype=self.time.dtype, device=self.time.device)
+        if self.own_level is None:
+            self.own_level = torch.zeros_like(self.in_contact)
 
     @property
     def fitted(self) -> torch.Tensor:
@@ -51,10 +62,14 @@ class Samples:
         return self.in_contact | self.pins_contact
 
     @classmethod
-    def from_curves(cls, curves: list[CurveKinematics], noise_inflation: float = 1.0) -> Samples:
+    def from_curves(
+        cls, curves: list[CurveKinematics], noise_inflation: float = 1.0, reference: CurveKinematics | None = None
+    ) -> Samples:
         """The curves' samples; ``noise_inflation``: the set's κ². A curve whose own baseline measured a
         larger κ² (real noise drifts more on some curves than on others) keeps its own for the whiteness
-        test: the set's would read its correlated noise as structure."""
+        test: the set's would read its correlated noise as structure. ``reference``: the reference curve, whose
+        removed line the elastic law carries into every curve; its own samples carry none (the law read off its
+        approach has the same error as its hold)."""
 
         def cat(values):
             return torch.from_numpy(np.concatenate(values))
@@ -76,6 +91,10 @@ class Samples:
             nominal_speed=cat([np.full(len(c.time), c.base_speed) for c in curves]),
             pins_contact=cat([c.pins_contact for c in curves]),
             curve_inflation=cat([np.full(len(c.time), max(noise_inflation, c.noise.inflation)) for c in curves]),
+            travel=cat([c.z if _line_sums(c, reference) else np.zeros_like(c.z) for c in curves]),
+            line_sums=cat([np.tile(_line_sums(c, reference) or (0.0,) * 3, (len(c.time), 1)) for c in curves]),
+            own_level=cat([np.full(len(c.time), c.baseline is not None and not c.baseline.common) for c in curves]),
+            reference_line=None if reference is None else _line_sums(reference, None),
         )
 
     def join(self, other: Samples) -> Samples:
@@ -108,3 +127,11 @@ class Samples:
     def to(self, device: str | torch.device) -> Samples:
         moved = {f.name: getattr(self, f.name) for f in fields(self)}
         return Samples(**{k: v.to(device) if torch.is_tensor(v) else v for k, v in moved.items()})
+
+
+def _line_sums(curve: CurveKinematics, reference: CurveKinematics | None) -> tuple[float, float, float] | None:
+    """The sums of the baseline line removed from ``curve`` (``Baseline.line_sums``); None where none was, or
+    ``curve`` is the ``reference``."""
+    if curve.baseline is None or (reference is not None and curve.curve == reference.curve):
+        return None
+    return curve.baseline.line_sums

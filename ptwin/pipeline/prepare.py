@@ -107,6 +107,11 @@ class Prepared:
         return self.noise.std
 
     @property
+    def reference(self) -> CurveKinematics:
+        """The reference curve, whose approach is the elastic law."""
+        return next(c for c in self.curves if c.curve == self.recordings.meta.reference_curve)
+
+    @property
     def estimated_contact(self) -> bool:
         return self.make_model.contact_ids is not None
 
@@ -135,7 +140,7 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     law = ReferenceCurve(reference, settings.model.elastic_nodes, settings.model.elastic_smoothing)
     fitted, notes = _fitted_curves(recordings, curves, reference, law)
     notes += [_unsettled_note(c) for c in curves if c.noise.unsettled]
-    samples, noise = fitted_samples(fitted, noise, settings.device)
+    samples, noise = fitted_samples(fitted, noise, settings.device, reference)
     basis = cached_basis(settings.pgd, settings.cache_dir, progress)
     s = settings.split
     split = split_samples(samples, tuple(s.fractions), s.mode, s.held_out_curve, settings.seed)
@@ -250,11 +255,13 @@ def _spot_note(curves) -> str | None:
     return variation.sentence() if variation is not None and variation.spread > SPOT_VARIATION else None
 
 
-def fitted_samples(fitted: list[CurveKinematics], noise: NoiseModel, device: str) -> tuple[Samples, NoiseModel]:
+def fitted_samples(
+    fitted: list[CurveKinematics], noise: NoiseModel, device: str, reference: CurveKinematics
+) -> tuple[Samples, NoiseModel]:
     """The ``fitted`` curves' samples under the set's ``noise`` (its κ²), and that noise with σ the curves' mean
-    over their fitted samples."""
+    over their fitted samples; ``reference``: the reference curve, whose baseline the law carries."""
     noise = replace(noise, std=float(np.average([c.noise.std for c in fitted], weights=_counts(fitted))))
-    return Samples.from_curves(fitted, noise.inflation).to(device), noise
+    return Samples.from_curves(fitted, noise.inflation, reference).to(device), noise
 
 
 def _counts(curves) -> list[int]:

@@ -260,7 +260,7 @@ def _capped_by_residuals(prepared: Prepared, first: FirstFits, block: int) -> Pr
 
 
 def _rebuilt(prepared: Prepared, fitted: list[CurveKinematics], noise: NoiseModel) -> Prepared:
-    samples, noise = fitted_samples(fitted, noise, prepared.samples.time.device)
+    samples, noise = fitted_samples(fitted, noise, prepared.samples.time.device, prepared.reference)
     return replace(prepared, samples=samples, noise=noise, fitted=fitted)
 
 
@@ -307,8 +307,7 @@ def candidate_settings(prepared: Prepared, settings: Settings) -> tuple[Diagnosi
 
 def _design(prepared: Prepared, settings: Settings) -> ExperimentDesign:
     """What the next experiment is proposed for: this set's speeds, depth, sampling, noise and data."""
-    curves = prepared.curves
-    reference = next(c for c in curves if c.curve == prepared.recordings.meta.reference_curve)
+    curves, reference = prepared.curves, prepared.reference
     return ExperimentDesign(
         meta=prepared.recordings.meta,
         speeds=tuple(sorted({c.base_speed for c in curves})),
