@@ -23,8 +23,10 @@ and a residual is structure when W exceeds its (1 − false alarm) quantile plus
 error of ``MODEL_ERROR`` of the noise std adds (B·e²/κ²): no model of real recordings is
 exact, and a discrepancy of a tenth of the noise is physics nobody left out (the elastic law's
 interpolation, the PGD basis, an independent instrument's elastic law). Not simulated:
-the fit of K and the terms (they absorb a little of the noise, so the test errs towards
-calling noise noise) and the isotonic step of the law (it only irons out wiggles).
+the fit of K and the terms, nor that of the removed baselines' line errors, which a residual
+is read less of (``ptwin.fitting.baseline_line``: they absorb a little of the noise, so the
+test errs towards calling noise noise), and the isotonic step of the law (it only irons out
+wiggles).
 """
 
 from __future__ import annotations
