@@ -6,7 +6,7 @@ extrapolated from a baseline of about a micron over an indentation of several: o
 white noise, 1 µm of baseline, 4 µm of travel) the removed tilts were off by up to 0.72 nN at the deepest
 sample, a misfit over hundreds of samples that no noise model of the residual holds. A fit read it as
 evidence: the reference's contact correction, which acts on the deep rate forces, moved 55 nm from the truth
-for a χ² gain of 60 (its Wald z +9.5), and the contact bench's held corrections moved on every null that held
+for a χ² gain of 60 (its Wald z +9.3), and the contact bench's held corrections moved on every null that held
 one.
 
 The line's error is a nuisance the fit can estimate with everything else, pinned by the baseline it came from:
@@ -14,9 +14,11 @@ minimising ‖r + X u‖² + uᵀΛu over u (X = [1, t] at the fitted samples, �
 both in noise units: the baseline samples fitted beside the curve, where their residual from the line is
 orthogonal to it) leaves rᵀ(I − X A⁻¹ Xᵀ)r, A = XᵀX + Λ. The fit minimises ‖L r‖² with LᵀL = I − X A⁻¹ Xᵀ:
 with X = Q R (thin QR) and S = R A⁻¹ Rᵀ (eigenvalues in [0, 1)), L = I − Q (I − (I − S)^½) Qᵀ, a rank-two
-update of each curve's residual, linear, so LM's Jacobian is L J and nothing else changes. Where the set's
-common level was removed (the levels are one level plus drag), only the tilt is a nuisance, with the
-precision of a slope whose level is unknown.
+update of each curve's residual, linear, so LM's Jacobian is L J and nothing else changes. The reference's
+line error is one more nuisance, shared: the elastic law read off its approach carries it into every other
+curve with the opposite sign, so X is D = [blocks of each curve's X_c | −X_c stacked], and S, of the size of
+two columns a curve, couples the curves (``_nuisances``). Where the set's common level was removed (the levels
+are one level plus drag), only the tilt is a nuisance, with the precision of a slope whose level is unknown.
 """
 
 from __future__ import annotations
@@ -97,10 +99,9 @@ class BaselineLines:
         lookup = torch.full((len(samples.curve_ids),), -1, dtype=torch.long, device=device)
         lookup[torch.tensor(self.lined, device=device)] = torch.arange(len(self.lined), device=device)
         mine = lookup[samples.curve]
-        t = samples.travel / self.scale
-        columns = torch.stack([torch.ones_like(t), t], dim=1) if self.own_level else t[:, None]
+        columns = torch.from_numpy(_design(samples.travel.cpu().numpy() / self.scale, self.own_level)).to(r)
         own = nuisances[mine.clamp(min=0)] - shared
-        return torch.where(mine >= 0, (columns * own).sum(dim=1), torch.zeros_like(t))
+        return torch.where(mine >= 0, (columns * own).sum(dim=1), torch.zeros_like(samples.travel))
 
 
 def line_projection(samples: Samples, index: torch.Tensor) -> Callable[[torch.Tensor], torch.Tensor]:
