@@ -36,10 +36,9 @@ class BaselineLines:
     the fit, ``fitted`` (the lines it implies, at every sample) for what it leaves. ``of`` gives None where no
     curve of ``index`` had a line removed."""
 
-    def __init__(self, samples: Samples, index: torch.Tensor, lined: list[int], own_level: bool):
-        curves = samples.curve[index].cpu().numpy()
-        travel = samples.travel[index].cpu().numpy()
-        sums = samples.line_sums[index].cpu().numpy()
+    def __init__(self, samples: Samples, read: tuple[np.ndarray, ...], lined: list[int], own_level: bool):
+        """``read``: (curve, travel, line sums) of the fit's samples, as ``of`` read them."""
+        curves, travel, sums = read
         self.scale = float(np.abs(travel).max()) or 1.0  # t in units of the deepest travel: A is well conditioned
         self.lined, self.own_level = lined, own_level
         rows = [np.flatnonzero(curves == c) for c in lined]
@@ -66,14 +65,15 @@ class BaselineLines:
 
     @classmethod
     def of(cls, samples: Samples, index: torch.Tensor) -> BaselineLines | None:
-        curves = samples.curve[index].cpu().numpy()
-        sums = samples.line_sums[index].cpu().numpy()
+        curves, sums = (a[index].cpu().numpy() for a in (samples.curve, samples.line_sums))
         lined = [int(c) for c in np.unique(curves) if sums[np.argmax(curves == c), 0] > 0]
         if not lined:
             return None
         own_level = bool(samples.own_level[index][int(np.argmax(curves == lined[0]))])
         lined = [c for c in lined if np.count_nonzero(curves == c) > 1 + own_level]  # more samples than a line has
-        return cls(samples, index, lined, own_level) if lined else None
+        if not lined:
+            return None
+        return cls(samples, (curves, samples.travel[index].cpu().numpy(), sums), lined, own_level)
 
     def _coefficients(self, r: torch.Tensor) -> torch.Tensor:
         """Qᵀ r, each lined curve's basis on its rows: (curves·width, trailing)."""
