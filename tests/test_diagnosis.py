@@ -307,6 +307,11 @@ class HeldOutFails:
 HELD_OUT_FAILS = HeldOutFails()
 
 
+def no_curves_to_leave_out(chosen, term):
+    """``_select``'s ``on_curves`` of a set with one curve: no curve to leave out, nothing to gate on."""
+    return None
+
+
 def ten_samples():
     """Ten samples in contact of σ 1, force 0, split 5/3/2: what ``fit_candidates`` reads of a set."""
     import torch
@@ -533,11 +538,29 @@ def test_a_pair_is_named_by_its_own_shape_only_where_no_single_term_is():
         "b": TermEvidence("b", 5.0, 40.0, 3.0, 0.005),
         "a + b": TermEvidence("a + b", 90.0, 60.0, 3.0, 0.01),
     }
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, evidence, HELD_OUT_PASSES)
+    pick = _select(
+        candidates,
+        DiagnosisSettings(terms=[]),
+        ABOVE_FIVE,
+        None,
+        1.0e-9,
+        evidence,
+        HELD_OUT_PASSES,
+        no_curves_to_leave_out,
+    )
     assert pick.detected and not pick.structured and pick.chosen == ("a", "b")
     assert "in the shape of a + b it is not" in pick.notes[-1]
     evidence["a"] = TermEvidence("a", 50.0, 40.0, 3.0, 0.005)
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, evidence, HELD_OUT_PASSES)
+    pick = _select(
+        candidates,
+        DiagnosisSettings(terms=[]),
+        ABOVE_FIVE,
+        None,
+        1.0e-9,
+        evidence,
+        HELD_OUT_PASSES,
+        no_curves_to_leave_out,
+    )
     assert pick.chosen == ("a",)
 
 
@@ -571,12 +594,55 @@ def test_structure_left_is_unexplained_only_where_the_hybrid_twin_predicts_bette
         (): candidate((), 2000.0, 1.0e-9, whiteness=50.0),
         ("a",): candidate(("a",), 1000.0, 0.5e-9, whiteness=8.0),  # above the test's 5: structure left
     }
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, twin_rmse, 1.0e-9, {}, HELD_OUT_PASSES)
+    pick = _select(
+        candidates,
+        DiagnosisSettings(terms=[]),
+        ABOVE_FIVE,
+        twin_rmse,
+        1.0e-9,
+        {},
+        HELD_OUT_PASSES,
+        no_curves_to_leave_out,
+    )
     assert pick.structured and pick.chosen == ("a",) and pick.unexplained == unexplained
-    alone = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_PASSES)
+    alone = _select(
+        candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_PASSES, no_curves_to_leave_out
+    )
     assert alone.chosen == ("a",) and alone.unexplained  # no witness
-    pruned = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_FAILS)
+    pruned = _select(
+        candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_FAILS, no_curves_to_leave_out
+    )
     assert pruned.chosen == () and pruned.unexplained  # a term the held-out test prunes is not named beside it
+
+
+@pytest.mark.parametrize(("gain", "named"), [(None, True), (1.2, True), (1.04, False), (0.85, False)])
+def test_a_term_beside_structure_no_term_explains_is_named_only_if_it_predicts_curves_left_out(gain, named):
+    # Replicates whose stiffness differs by 10%, nothing concealed (the realism suite): a pore relaxation passed the
+    # BIC margin and the validation samples, which come from the curves the fit saw, and took part of each curve's
+    # own misfit; on curves left out of the fit it predicted 4% better. Beside structure no term explains, a term
+    # must predict them better by the held-out margin (10%); with one curve there is none to leave out (None).
+    from ptwin.diagnosis.confidence import HeldOut
+    from ptwin.diagnosis.diagnose import DiagnosisSettings, _select
+
+    candidates = {
+        (): candidate((), 2000.0, 1.0e-9, whiteness=50.0),
+        ("a",): candidate(("a",), 1000.0, 0.5e-9, whiteness=8.0),  # above the test's 5: structure left
+    }
+    asked = []
+
+    def on_curves(chosen, term):
+        asked.append((chosen, term))
+        return None if gain is None else HeldOut(gain, {}, 4)
+
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_PASSES, on_curves)
+    assert asked == [(("a",), "a")] and pick.structured and pick.unexplained
+    assert pick.chosen == (("a",) if named else ())
+    if not named:
+        assert "on curves left out of the fit a predicts" in pick.notes[-1] and pick.notes[-1].endswith("not named")
+    # A term that leaves no structure is not asked: the validation samples judge it (and the grade reads the curves).
+    candidates[("a",)] = candidate(("a",), 1000.0, 0.5e-9, whiteness=2.0)
+    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_PASSES, on_curves)
+    assert pick.chosen == ("a",) and not pick.unexplained and len(asked) == 1
 
 
 def test_a_residual_within_the_noise_as_a_whole_names_a_term_it_is_not_noise_in_the_shape_of():
@@ -587,19 +653,55 @@ def test_a_residual_within_the_noise_as_a_whole_names_a_term_it_is_not_noise_in_
 
     candidates = {(): candidate((), 2000.0, 1.0e-9), ("a",): candidate(("a",), 1000.0, 0.7e-9)}
     beyond = {"a": TermEvidence("a", 120.0, 40.0, 3.0, 0.005)}
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, beyond, HELD_OUT_PASSES)
+    pick = _select(
+        candidates,
+        DiagnosisSettings(terms=[]),
+        ABOVE_FIVE,
+        None,
+        1.0e-9,
+        beyond,
+        HELD_OUT_PASSES,
+        no_curves_to_leave_out,
+    )
     assert pick.detected and not pick.structured and pick.chosen == ("a",)
     assert "in the shape of a it is not" in pick.notes[-1]
     within = {"a": TermEvidence("a", 30.0, 40.0, 3.0, 0.005)}
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, within, HELD_OUT_PASSES)
+    pick = _select(
+        candidates,
+        DiagnosisSettings(terms=[]),
+        ABOVE_FIVE,
+        None,
+        1.0e-9,
+        within,
+        HELD_OUT_PASSES,
+        no_curves_to_leave_out,
+    )
     assert not pick.detected and pick.preferred == ("a",)
     # Beyond in its own shape but pruned by the held-out test: the pruning is said, and not contradicted.
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, beyond, HELD_OUT_FAILS)
+    pick = _select(
+        candidates,
+        DiagnosisSettings(terms=[]),
+        ABOVE_FIVE,
+        None,
+        1.0e-9,
+        beyond,
+        HELD_OUT_FAILS,
+        no_curves_to_leave_out,
+    )
     assert not pick.detected and pick.preferred == ("a",)
     assert pick.notes[0].startswith("a pruned") and "do not bear it out" in pick.notes[-1]
     # Nor is it preferred where it won the BIC by running K to 1e25 m² (a degenerate parametrisation).
     candidates[("a",)].fit.permeability = 1e25
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, within, HELD_OUT_PASSES)
+    pick = _select(
+        candidates,
+        DiagnosisSettings(terms=[]),
+        ABOVE_FIVE,
+        None,
+        1.0e-9,
+        within,
+        HELD_OUT_PASSES,
+        no_curves_to_leave_out,
+    )
     assert not pick.detected and pick.preferred == () and pick.notes == []
 
 
@@ -702,8 +804,11 @@ def test_a_term_named_beside_unexplained_structure_gets_no_interval_and_says_why
     def no_profile(*args):
         raise AssertionError("a profile interval of a model that misses the data")
 
+    def again(*args):
+        raise AssertionError("the curves left out refitted again: the selection ran them (on_curves)")
+
     monkeypatch.setattr(diagnose, "_parameter_intervals", no_profile)
-    monkeypatch.setattr(diagnose, "held_out_curves", lambda *args: None)
+    monkeypatch.setattr(diagnose, "held_out_curves", again)
     monkeypatch.setattr(diagnose, "_test_rmse", lambda *args: 2.0)
     base, named = candidate((), 2000.0, 2e-11), candidate(("solid_viscosity",), 1000.0, 1.6e-11)
     named.fit.params = {"solid_viscosity": {"gamma": 6.15}}
@@ -717,6 +822,7 @@ def test_a_term_named_beside_unexplained_structure_gets_no_interval_and_says_why
         noise=SimpleNamespace(std=1e-11),
         witness=None,
         unexplained=left,
+        on_curves={"solid_viscosity": None},  # too few curves to leave one out
         samples=None,
         seen=None,
         split=None,
