@@ -3,7 +3,9 @@
 Held-out curves: each fitted curve in turn is left out, the model with the named set
 and the model without the term are refitted on the others (from the full fit, so a
 few LM steps), and both predict the curve they never saw. The gain is the ratio of
-their RMS over all held-out curves; the term's parameters across the folds show
+their RMS over all held-out curves, each model's residual there less the lines that curve's baseline
+allows (``fitted_difference``, as every fit reads a residual: raw, the lines' errors, the same for both
+models, buried what they differ by); the term's parameters across the folds show
 whether the curves agree on them, among the folds that still hold every kind of segment
 (a fold without the only hold fits the approaches alone: a different question).
 
@@ -31,7 +33,7 @@ import torch
 
 from ptwin.diagnosis.words import times_better
 from ptwin.fitting.lm import FitError
-from ptwin.fitting.physics_fit import PhysicsFit, fit_physics, held_as
+from ptwin.fitting.physics_fit import PhysicsFit, fit_physics, fitted_difference, held_as
 from ptwin.physics.samples import Samples
 
 STABLE = 0.5  # largest relative spread of a parameter across folds
@@ -77,7 +79,7 @@ def held_out_curves(
             except FitError:
                 return None
             with torch.no_grad():
-                errors[key] += (refit.model(samples)[held] - samples.force[held]).square().sum().item()
+                errors[key] += fitted_difference(refit.model, samples, held)[held].square().sum().item()
             if key == "named" and comparable(rest):
                 for term, params in refit.params.items():
                     for name, value in params.items():
