@@ -312,6 +312,14 @@ def no_curves_to_leave_out(chosen, term):
     return None
 
 
+def select(candidates, flexible, evidence, held_out, on_curves=no_curves_to_leave_out):
+    """``diagnose._select`` on ``candidates`` with no terms to fit, a structure test whose threshold is 5 and a noise
+    std of 1 nN; ``flexible``: the twin's validation RMS [N] (None: no twin)."""
+    from ptwin.diagnosis.diagnose import DiagnosisSettings, _select
+
+    return _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, flexible, 1.0e-9, evidence, held_out, on_curves)
+
+
 def ten_samples():
     """Ten samples in contact of σ 1, force 0, split 5/3/2: what ``fit_candidates`` reads of a set."""
     import torch
@@ -524,7 +532,6 @@ def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_te
 def test_a_pair_is_named_by_its_own_shape_only_where_no_single_term_is():
     # W passes; neither term alone is beyond the noise in its shape, the pair is: named together. With a beyond
     # on its own, the single term is named and the pair is not weighed.
-    from ptwin.diagnosis.diagnose import DiagnosisSettings, _select
     from ptwin.diagnosis.null import TermEvidence
 
     candidates = {
@@ -538,29 +545,11 @@ def test_a_pair_is_named_by_its_own_shape_only_where_no_single_term_is():
         "b": TermEvidence("b", 5.0, 40.0, 3.0, 0.005),
         "a + b": TermEvidence("a + b", 90.0, 60.0, 3.0, 0.01),
     }
-    pick = _select(
-        candidates,
-        DiagnosisSettings(terms=[]),
-        ABOVE_FIVE,
-        None,
-        1.0e-9,
-        evidence,
-        HELD_OUT_PASSES,
-        no_curves_to_leave_out,
-    )
+    pick = select(candidates, None, evidence, HELD_OUT_PASSES)
     assert pick.detected and not pick.structured and pick.chosen == ("a", "b")
     assert "in the shape of a + b it is not" in pick.notes[-1]
     evidence["a"] = TermEvidence("a", 50.0, 40.0, 3.0, 0.005)
-    pick = _select(
-        candidates,
-        DiagnosisSettings(terms=[]),
-        ABOVE_FIVE,
-        None,
-        1.0e-9,
-        evidence,
-        HELD_OUT_PASSES,
-        no_curves_to_leave_out,
-    )
+    pick = select(candidates, None, evidence, HELD_OUT_PASSES)
     assert pick.chosen == ("a",)
 
 
@@ -588,30 +577,16 @@ def test_structure_left_is_unexplained_only_where_the_hybrid_twin_predicts_bette
     # On a 1 nN noise the chosen term's 0.5 nN: a twin at 0.49 nN does better by what a model error of 0.1 nN
     # would (0.5² − 0.49² < 0.15²), no more; at 0.3 nN it captures what the term leaves. The term passed the BIC
     # margin and the held-out test either way, so it is named, beside "unexplained" where structure is left.
-    from ptwin.diagnosis.diagnose import DiagnosisSettings, _select
 
     candidates = {
         (): candidate((), 2000.0, 1.0e-9, whiteness=50.0),
         ("a",): candidate(("a",), 1000.0, 0.5e-9, whiteness=8.0),  # above the test's 5: structure left
     }
-    pick = _select(
-        candidates,
-        DiagnosisSettings(terms=[]),
-        ABOVE_FIVE,
-        twin_rmse,
-        1.0e-9,
-        {},
-        HELD_OUT_PASSES,
-        no_curves_to_leave_out,
-    )
+    pick = select(candidates, twin_rmse, {}, HELD_OUT_PASSES)
     assert pick.structured and pick.chosen == ("a",) and pick.unexplained == unexplained
-    alone = _select(
-        candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_PASSES, no_curves_to_leave_out
-    )
+    alone = select(candidates, None, {}, HELD_OUT_PASSES)
     assert alone.chosen == ("a",) and alone.unexplained  # no witness
-    pruned = _select(
-        candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_FAILS, no_curves_to_leave_out
-    )
+    pruned = select(candidates, None, {}, HELD_OUT_FAILS)
     assert pruned.chosen == () and pruned.unexplained  # a term the held-out test prunes is not named beside it
 
 
@@ -622,7 +597,6 @@ def test_a_term_beside_structure_no_term_explains_is_named_only_if_it_predicts_c
     # own misfit; on curves left out of the fit it predicted 4% better. Beside structure no term explains, a term
     # must predict them better by the held-out margin (10%); with one curve there is none to leave out (None).
     from ptwin.diagnosis.confidence import HeldOut
-    from ptwin.diagnosis.diagnose import DiagnosisSettings, _select
 
     candidates = {
         (): candidate((), 2000.0, 1.0e-9, whiteness=50.0),
@@ -634,74 +608,37 @@ def test_a_term_beside_structure_no_term_explains_is_named_only_if_it_predicts_c
         asked.append((chosen, term))
         return None if gain is None else HeldOut(gain, {}, 4)
 
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_PASSES, on_curves)
+    pick = select(candidates, None, {}, HELD_OUT_PASSES, on_curves)
     assert asked == [(("a",), "a")] and pick.structured and pick.unexplained
     assert pick.chosen == (("a",) if named else ())
     if not named:
         assert "on curves left out of the fit a predicts" in pick.notes[-1] and pick.notes[-1].endswith("not named")
     # A term that leaves no structure is not asked: the validation samples judge it (and the grade reads the curves).
     candidates[("a",)] = candidate(("a",), 1000.0, 0.5e-9, whiteness=2.0)
-    pick = _select(candidates, DiagnosisSettings(terms=[]), ABOVE_FIVE, None, 1.0e-9, {}, HELD_OUT_PASSES, on_curves)
+    pick = select(candidates, None, {}, HELD_OUT_PASSES, on_curves)
     assert pick.chosen == ("a",) and not pick.unexplained and len(asked) == 1
 
 
 def test_a_residual_within_the_noise_as_a_whole_names_a_term_it_is_not_noise_in_the_shape_of():
     # W passes (1 < 5), but term a takes 120 units of χ² off where noise and tolerated model error give 40: named.
     # At 30 it is not: the information criterion alone (ΔBIC 690) only lists it beside the base model.
-    from ptwin.diagnosis.diagnose import DiagnosisSettings, _select
     from ptwin.diagnosis.null import TermEvidence
 
     candidates = {(): candidate((), 2000.0, 1.0e-9), ("a",): candidate(("a",), 1000.0, 0.7e-9)}
     beyond = {"a": TermEvidence("a", 120.0, 40.0, 3.0, 0.005)}
-    pick = _select(
-        candidates,
-        DiagnosisSettings(terms=[]),
-        ABOVE_FIVE,
-        None,
-        1.0e-9,
-        beyond,
-        HELD_OUT_PASSES,
-        no_curves_to_leave_out,
-    )
+    pick = select(candidates, None, beyond, HELD_OUT_PASSES)
     assert pick.detected and not pick.structured and pick.chosen == ("a",)
     assert "in the shape of a it is not" in pick.notes[-1]
     within = {"a": TermEvidence("a", 30.0, 40.0, 3.0, 0.005)}
-    pick = _select(
-        candidates,
-        DiagnosisSettings(terms=[]),
-        ABOVE_FIVE,
-        None,
-        1.0e-9,
-        within,
-        HELD_OUT_PASSES,
-        no_curves_to_leave_out,
-    )
+    pick = select(candidates, None, within, HELD_OUT_PASSES)
     assert not pick.detected and pick.preferred == ("a",)
     # Beyond in its own shape but pruned by the held-out test: the pruning is said, and not contradicted.
-    pick = _select(
-        candidates,
-        DiagnosisSettings(terms=[]),
-        ABOVE_FIVE,
-        None,
-        1.0e-9,
-        beyond,
-        HELD_OUT_FAILS,
-        no_curves_to_leave_out,
-    )
+    pick = select(candidates, None, beyond, HELD_OUT_FAILS)
     assert not pick.detected and pick.preferred == ("a",)
     assert pick.notes[0].startswith("a pruned") and "do not bear it out" in pick.notes[-1]
     # Nor is it preferred where it won the BIC by running K to 1e25 m² (a degenerate parametrisation).
     candidates[("a",)].fit.permeability = 1e25
-    pick = _select(
-        candidates,
-        DiagnosisSettings(terms=[]),
-        ABOVE_FIVE,
-        None,
-        1.0e-9,
-        within,
-        HELD_OUT_PASSES,
-        no_curves_to_leave_out,
-    )
+    pick = select(candidates, None, within, HELD_OUT_PASSES)
     assert not pick.detected and pick.preferred == () and pick.notes == []
 
 
