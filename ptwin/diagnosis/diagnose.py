@@ -413,12 +413,14 @@ def _select(
     does better, or there is no twin, the subset is still named beside "unexplained": it passed the BIC
     margin and the held-out test against the model without it, so what it takes is in the data, while what
     it leaves is no term's (contract v2.3: structure "that no accepted term explains"); its grade is weak and
-    its sizes carry no interval (``_left_out_entry``), the model missing the data. Named there only if it also
-    predicts curves left out of the fit better by the held-out margin (``on_curves``, where there are curves to
-    leave out): what no term explains can belong to each curve (a spot's own stiffness or contact), and the
+    its sizes carry no interval (``_left_out_entry``), the model missing the data. Either way, a subset that
+    leaves structure is named only if each of its terms also predicts curves left out of the fit better by the
+    held-out margin (``on_curves``, where there are curves to leave out): what is left can belong to each curve
+    (a spot's own stiffness or contact, which a twin of depth and speed cannot learn either), and the
     validation samples come from the curves the fit saw, so a term can take part of every curve's own misfit
-    and pass them (replicates whose stiffness differs by 10%, nothing concealed: a pore relaxation, weak, that
-    predicted curves left out 4% better, and on another seed a strain-dependent K 14% worse).
+    and pass them (replicates whose stiffness differs by 10%, nothing concealed: a pore relaxation, weak beside
+    unexplained structure, that predicted curves left out 4% better; on other seeds a strain-dependent K 14%
+    worse, and one named where the twin did no better, 6% better).
     No structure in the residual as a whole: a term is still named where the residual is not noise in its own
     shape (``evidence``, ``null.TermEvidence``: beyond what noise and a model error of ``MODEL_ERROR`` give
     it; a test of one shape is far more powerful than a test of all of them), if the selection keeps it.
@@ -432,15 +434,18 @@ def _select(
         corrected = candidates[chosen]
         if chosen and not corrected.leaves_structure(test):
             return _Selection(True, chosen, notes=notes)
-        if chosen and flexible is not None and not beyond_model_error(flexible, corrected.val_rmse, noise_std):
+        explained = bool(chosen) and flexible is not None
+        explained = explained and not beyond_model_error(flexible, corrected.val_rmse, noise_std)
+        if explained:
             notes.append(
                 f"{' + '.join(chosen)} leaves structure ({test.words(corrected.whiteness)}), but the hybrid twin "
                 f"predicts the validation samples no better than a model error of {MODEL_ERROR:g} noise std "
                 f"would ({flexible * 1e9:.3g} against {corrected.val_rmse * 1e9:.3g} nN): nothing else is left "
                 f"to explain"
             )
-            return _Selection(True, chosen, notes=notes)
-        return _beside_unexplained(chosen, test.words(corrected.whiteness), notes, on_curves, s.heldout_margin)
+        return _leaving_structure(
+            chosen, test.words(corrected.whiteness), notes, on_curves, s.heldout_margin, explained
+        )
     proven = [label for label, e in evidence.items() if e.beyond]
     pruned = []  # why a subset beyond the noise in its own shape is not named: the held-out test pruned it
     if proven:
@@ -473,16 +478,17 @@ def _select(
     return _Selection(False, preferred=best.terms, notes=[*pruned, why])
 
 
-def _beside_unexplained(
+def _leaving_structure(
     chosen: tuple[str, ...],
     left: str,
     notes: list[str],
     on_curves: Callable[[tuple[str, ...], str], HeldOut | None],
     margin: float,
+    explained: bool,
 ) -> _Selection:
-    """``_select`` where the chosen subset leaves structure ``left`` (in words) that a flexible model captures:
-    named beside "unexplained" where each term predicts curves left out of the fit better by ``margin``
-    (``on_curves``; a set with no curve to leave out is not asked), else nothing named."""
+    """``_select`` where the chosen subset leaves structure ``left`` (in words): named where each term predicts
+    curves left out of the fit better by ``margin`` (``on_curves``; a set with no curve to leave out is not
+    asked), beside "unexplained" unless the hybrid twin did no better (``explained``); else nothing named."""
     if not chosen:
         return _Selection(True, unexplained=True, notes=notes)
     passed = (
@@ -494,13 +500,14 @@ def _beside_unexplained(
     if short:
         shortfalls = "; ".join(f"{term} predicts {times_better(held.gain)}" for term, held in short)
         notes.append(
-            f"{passed}, and on curves left out of the fit {shortfalls} (a term beside structure no term explains "
-            f"must predict them {100 * margin:.0f}% better: that structure may be each curve's own, which the "
-            "validation samples share): not named"
+            f"{passed}, and on curves left out of the fit {shortfalls} (a term beside structure that no model "
+            f"explains must predict them {100 * margin:.0f}% better: that structure may be each curve's own, which "
+            "the validation samples share): not named"
         )
         return _Selection(True, unexplained=True, notes=notes)
-    notes.append(f"{passed}: named, weak, beside what no term of the vocabulary explains")
-    return _Selection(True, chosen, unexplained=True, notes=notes, on_curves=curves)
+    if not explained:
+        notes.append(f"{passed}: named, weak, beside what no term of the vocabulary explains")
+    return _Selection(True, chosen, unexplained=not explained, notes=notes, on_curves=curves)
 
 
 def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings, held_out: HeldOutTest) -> list[tuple[str, ...]]:
