@@ -443,9 +443,8 @@ def _select(
                 f"would ({flexible * 1e9:.3g} against {corrected.val_rmse * 1e9:.3g} nN): nothing else is left "
                 f"to explain"
             )
-        return _leaving_structure(
-            chosen, test.words(corrected.whiteness), notes, on_curves, s.heldout_margin, explained
-        )
+        left = test.words(corrected.whiteness)
+        return _leaving_structure(chosen, left, notes, on_curves, s.heldout_margin, explained, corrected.fit)
     proven = [label for label, e in evidence.items() if e.beyond]
     pruned = []  # why a subset beyond the noise in its own shape is not named: the held-out test pruned it
     if proven:
@@ -485,10 +484,13 @@ def _leaving_structure(
     on_curves: Callable[[tuple[str, ...], str], HeldOut | None],
     margin: float,
     explained: bool,
+    fit: PhysicsFit,
 ) -> _Selection:
-    """``_select`` where the chosen subset leaves structure ``left`` (in words): named where each term predicts
-    curves left out of the fit better by ``margin`` (``on_curves``; a set with no curve to leave out is not
-    asked), beside "unexplained" unless the hybrid twin did no better (``explained``); else nothing named."""
+    """``_select`` where the chosen subset (fitted: ``fit``) leaves structure ``left`` (in words): named where each
+    term predicts curves left out of the fit better by ``margin`` (``on_curves``; a set with no curve to leave out
+    is not asked) at values the field has (``Term.implausible``: at others, beside a misfit, a term takes the
+    shape of the model's error, as a relaxation of g 22 did on replicates of differing stiffness), beside
+    "unexplained" unless the hybrid twin did no better (``explained``); else nothing named."""
     if not chosen:
         return _Selection(True, unexplained=True, notes=notes)
     passed = (
@@ -496,13 +498,17 @@ def _leaving_structure(
         f"structure ({left})"
     )
     curves = {term: on_curves(chosen, term) for term in chosen}
-    short = [(term, held) for term, held in curves.items() if held is not None and held.gain < 1 + margin]
+    short = [
+        f"on curves left out of the fit {term} predicts {times_better(held.gain)}"
+        for term, held in curves.items()
+        if held is not None and held.gain < 1 + margin
+    ]
+    short += [f"{term}'s {fit.implausible[term]}" for term in chosen if term in fit.implausible]
     if short:
-        shortfalls = "; ".join(f"{term} predicts {times_better(held.gain)}" for term, held in short)
         notes.append(
-            f"{passed}, and on curves left out of the fit {shortfalls} (a term beside structure that no model "
-            f"explains must predict them {100 * margin:.0f}% better: that structure may be each curve's own, which "
-            "the validation samples share): not named"
+            f"{passed}, and {'; '.join(short)} (beside structure that no model explains a term must predict the "
+            f"curves left out {100 * margin:.0f}% better, at values the field has: that structure may be each "
+            "curve's own, which the validation samples share): not named"
         )
         return _Selection(True, unexplained=True, notes=notes)
     if not explained:
