@@ -154,3 +154,33 @@ def test_curves_left_out_are_compared_less_the_lines_their_baselines_allow(monke
     monkeypatch.setattr(confidence, "fit_physics", refit)
     seen = torch.arange(len(samples))
     assert confidence.held_out_curves(lambda key, *args: key, lined, seen, fit("named"), fit("smaller")).gain > 3.0
+
+
+def test_a_fold_that_cannot_be_fitted_is_said_never_taken_for_too_few_curves(monkeypatch):
+    # ``held_out_curves`` once returned None both with one curve and where a fold's fit failed, and None is "too few
+    # curves to leave one out", a mild shortfall that does not gate a name: a term whose test failed went through
+    # untested. Made to fail on purpose with 170745c's confidence.py (None).
+    from types import SimpleNamespace
+
+    import ptwin.diagnosis.confidence as confidence
+    from ptwin.fitting.lm import FitError
+
+    samples = _samples(own_level=True)
+
+    def refit(model, samples, rest, *args, **kwargs):
+        if model == "smaller" and not (samples.curve[rest] == 1).any():
+            raise FitError("the model cannot be evaluated (off the grid)")
+        return SimpleNamespace(model=lambda s: torch.zeros(len(s), dtype=torch.float64), params={}, param_std={})
+
+    def fit(key):
+        return SimpleNamespace(terms=key, params={}, permeability=1e-16, reference_free=False)
+
+    monkeypatch.setattr(confidence, "held_as", lambda model, fitted: model)
+    monkeypatch.setattr(confidence, "fit_physics", refit)
+    seen = torch.arange(len(samples))
+    failed = confidence.held_out_curves(lambda key, *args: key, samples, seen, fit("named"), fit("smaller"))
+    assert isinstance(failed, confidence.FoldFailed)
+    assert (
+        failed.reason
+        == f"the fit without curve {samples.curve_ids[1]!r} failed: the model cannot be evaluated (off the grid)"
+    )

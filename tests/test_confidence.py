@@ -2,7 +2,7 @@
 
 import pytest
 
-from ptwin.diagnosis.confidence import HeldOut, grade
+from ptwin.diagnosis.confidence import FoldFailed, HeldOut, grade
 
 GOOD = HeldOut(gain=2.0, spread={"t.p": 0.1}, folds=4)
 
@@ -18,6 +18,7 @@ GOOD = HeldOut(gain=2.0, spread={"t.p": 0.1}, folds=4)
         (500.0, [], "p = 99 is outside [0, 50]", GOOD, "weak", "outside"),
         (500.0, [], None, HeldOut(1.02, {"t.p": 0.1}, 4), "weak", "improves the prediction by only 2%"),
         (15.0, [], None, None, "weak", "too few curves"),
+        (500.0, [], None, FoldFailed("the fit without curve 'v1' failed: off the grid"), "weak", "could not be tested"),
     ],
 )
 def test_grade(removal, rivals, implausible, held_out, expected, reason):

@@ -591,15 +591,16 @@ def test_structure_left_is_unexplained_only_where_the_hybrid_twin_predicts_bette
 
 
 @pytest.mark.parametrize("twin_rmse", [None, 0.6e-9])
-@pytest.mark.parametrize(("gain", "named"), [(None, True), (1.2, True), (1.04, False), (0.85, False)])
+@pytest.mark.parametrize(("gain", "named"), [(None, True), (1.2, True), (1.04, False), (0.85, False), ("fold", False)])
 def test_a_term_that_leaves_structure_is_named_only_if_it_predicts_curves_left_out(gain, named, twin_rmse):
     # Replicates whose stiffness differs by 10%, nothing concealed (the realism suite): a pore relaxation passed the
     # BIC margin and the validation samples, which come from the curves the fit saw, and took part of each curve's
     # own misfit; on curves left out of the fit it predicted 4% better. A term that leaves structure must predict
     # them better by the held-out margin (10%), beside "unexplained" or where the twin does no better (0.6 nN
     # against the term's 0.5: each curve's own stiffness is no function of depth and speed, which the twin learns,
-    # and a strain-dependent K was named so, 6% better); with one curve there is none to leave out (None).
-    from ptwin.diagnosis.confidence import HeldOut
+    # and a strain-dependent K was named so, 6% better); with one curve there is none to leave out (None). A fold
+    # that cannot be fitted tests nothing: not named, never taken for "too few curves".
+    from ptwin.diagnosis.confidence import FoldFailed, HeldOut
 
     candidates = {
         (): candidate((), 2000.0, 1.0e-9, whiteness=50.0),
@@ -609,13 +610,18 @@ def test_a_term_that_leaves_structure_is_named_only_if_it_predicts_curves_left_o
 
     def on_curves(chosen, term):
         asked.append((chosen, term))
+        if gain == "fold":
+            return FoldFailed("the fit without curve 'v1' failed: the model cannot be evaluated (off the grid)")
         return None if gain is None else HeldOut(gain, {}, 4)
 
     pick = select(candidates, twin_rmse, {}, HELD_OUT_PASSES, on_curves)
     assert asked == [(("a",), "a")] and pick.structured
     assert pick.chosen == (("a",) if named else ()) and pick.unexplained == (not named or twin_rmse is None)
     if not named:
-        assert "on curves left out of the fit a predicts" in pick.notes[-1] and pick.notes[-1].endswith("not named")
+        said = (
+            "a could not be tested on curves left out" if gain == "fold" else "on curves left out of the fit a predicts"
+        )
+        assert said in pick.notes[-1] and pick.notes[-1].endswith("not named")
     # At values the field does not have (a relaxation of g 22 on replicates of differing stiffness, predicting the
     # curves left out 10% better), it is the model's error in the term's shape: not named.
     candidates[("a",)].fit.implausible = {"a": "p = 22 is outside [0, 5]"}

@@ -17,10 +17,11 @@ The grade (README, "Confidence"):
 - moderate: at most one shortfall, and a mild one — a smaller BIC cost (still ≥ the
   margin), too few curves to hold one out, or parameters that vary across folds;
 - weak: anything else, in particular a confounded, implausible or held-out-contradicted
-  term, one whose 95% profile interval under the noise model reaches the value where it
-  does nothing (γ = 0, M → ∞): the tests that named it weigh its own shape, the interval every
-  nuisance refitted with it; or one named beside structure that no term explains (its size
-  is what it takes in a model that misses the data). The reasons are given in words either way.
+  term, one left untested where a fold could not be fitted (``FoldFailed``), one whose 95%
+  profile interval under the noise model reaches the value where it does nothing (γ = 0,
+  M → ∞): the tests that named it weigh its own shape, the interval every nuisance refitted
+  with it; or one named beside structure that no term explains (its size is what it takes in
+  a model that misses the data). The reasons are given in words either way.
 """
 
 from __future__ import annotations
@@ -50,15 +51,26 @@ class HeldOut:
     folds: int
 
 
+@dataclass
+class FoldFailed:
+    """Curves left out that could not be tested: a fit without one of them failed (``reason``, in words). Never
+    read as "too few curves": a term that could not be tested on a curve it was not fitted to is not trusted."""
+
+    reason: str
+
+
+OnCurvesLeftOut = HeldOut | FoldFailed | None  # None: fewer than two fitted curves, none to leave out
+
+
 def held_out_curves(
     make_model: Callable,
     samples: Samples,
     seen: torch.Tensor,
     named: PhysicsFit,
     smaller: PhysicsFit,
-) -> HeldOut | None:
+) -> OnCurvesLeftOut:
     """``named`` against ``smaller`` on curves left out one at a time (None with fewer than two fitted
-    curves, or when a fold cannot be fitted); fits start from the full fits' values, the reference's contact
+    curves; ``FoldFailed`` when a fold cannot be fitted); fits start from the full fits' values, the reference's contact
     correction fitted or held as in the full fits (``ptwin.fitting.physics_fit.fit_with_starts``)."""
     if len(samples.curve_ids) < 2:
         return None
@@ -76,8 +88,8 @@ def held_out_curves(
             model = held_as(make_model(fit.terms, fit.params, fit.permeability), fit)
             try:
                 refit = fit_physics(model, samples, rest, FOLD_ITERATIONS, reference_free=fit.reference_free)
-            except FitError:
-                return None
+            except FitError as error:
+                return FoldFailed(f"the fit without curve {samples.curve_ids[curve]!r} failed: {error}")
             with torch.no_grad():
                 errors[key] += fitted_difference(refit.model, samples, held)[held].square().sum().item()
             if key == "named" and comparable(rest):
@@ -114,7 +126,7 @@ def grade(
     removal_cost: float,
     confounded_with: list[str],
     implausible: str | None,
-    held_out: HeldOut | None,
+    held_out: OnCurvesLeftOut,
     bic_margin: float,
     heldout_margin: float,
     absent_within: Sequence[str] = (),
@@ -141,6 +153,8 @@ def grade(
         )
     if held_out is None:
         mild.append("too few curves to test it on a curve it was not fitted to")
+    elif isinstance(held_out, FoldFailed):
+        serious.append(f"it could not be tested on curves left out of the fit ({held_out.reason})")
     else:
         if held_out.gain < 1:
             serious.append(f"on curves left out of the fit it predicts {times_better(held_out.gain)}")

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import torch
 
 from ptwin.data.noise import NoiseModel
-from ptwin.diagnosis.confidence import Grade, HeldOut, grade, held_out_curves
+from ptwin.diagnosis.confidence import FoldFailed, Grade, HeldOut, OnCurvesLeftOut, grade, held_out_curves
 from ptwin.diagnosis.design import MAX_REPEATS, ExperimentDesign, Prediction
 from ptwin.diagnosis.intervals import profile_interval, within
 from ptwin.diagnosis.locate import Mismatch, locate
@@ -305,7 +305,7 @@ class _Weighing:
         evidence = shape_evidence(fits, test)
         seen = self.split.judged(self.samples)
 
-        def on_curves(chosen: tuple[str, ...], term: str) -> HeldOut | None:
+        def on_curves(chosen: tuple[str, ...], term: str) -> OnCurvesLeftOut:
             smaller = fits[weighed_against(fits, chosen, term)].fit
             return held_out_curves(self.make_model, self.samples, seen, fits[chosen].fit, smaller)
 
@@ -388,7 +388,7 @@ class _Selection:
     preferred: tuple[str, ...] = ()  # no structure, yet the information criterion prefers this term
     unexplained: bool = False
     notes: list[str] = field(default_factory=list)
-    on_curves: dict[str, HeldOut | None] = field(default_factory=dict)  # chosen term → ``held_out_curves``, if run
+    on_curves: dict[str, OnCurvesLeftOut] = field(default_factory=dict)  # chosen term → ``held_out_curves``, if run
 
     @property
     def detected(self) -> bool:
@@ -403,7 +403,7 @@ def _select(
     noise_std: float,
     evidence: dict[str, TermEvidence],
     held_out: HeldOutTest,
-    on_curves: Callable[[tuple[str, ...], str], HeldOut | None],
+    on_curves: Callable[[tuple[str, ...], str], OnCurvesLeftOut],
 ) -> _Selection:
     """Structure in the base residual (``test``): the chosen subset (``choose``), or unexplained if there is
     none, or if it leaves structure that a flexible model captures: the hybrid twin (validation RMS
@@ -481,7 +481,7 @@ def _leaving_structure(
     chosen: tuple[str, ...],
     left: str,
     notes: list[str],
-    on_curves: Callable[[tuple[str, ...], str], HeldOut | None],
+    on_curves: Callable[[tuple[str, ...], str], OnCurvesLeftOut],
     margin: float,
     explained: bool,
     fit: PhysicsFit,
@@ -499,9 +499,11 @@ def _leaving_structure(
     )
     curves = {term: on_curves(chosen, term) for term in chosen}
     short = [
-        f"on curves left out of the fit {term} predicts {times_better(held.gain)}"
+        f"{term} could not be tested on curves left out of the fit ({held.reason})"
+        if isinstance(held, FoldFailed)
+        else f"on curves left out of the fit {term} predicts {times_better(held.gain)}"
         for term, held in curves.items()
-        if held is not None and held.gain < 1 + margin
+        if isinstance(held, FoldFailed) or (held is not None and held.gain < 1 + margin)
     ]
     short += [f"{term}'s {fit.implausible[term]}" for term in chosen if term in fit.implausible]
     if short:
@@ -591,7 +593,7 @@ class _Context:
     noise: NoiseModel
     witness: float | None  # share of the hybrid network's learned error the named terms account for (None: no twin)
     unexplained: str | None  # the structure the named terms leave, in words (None: they leave none)
-    on_curves: dict[str, HeldOut | None]  # ``held_out_curves`` of the named terms the selection already ran
+    on_curves: dict[str, OnCurvesLeftOut]  # ``held_out_curves`` of the named terms the selection already ran
 
 
 def _test_rmse(candidate: Candidate, samples: Samples, split: Split) -> float:
@@ -743,7 +745,7 @@ def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: Diag
     }
 
 
-def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut | None, verdict: Grade, c) -> str:
+def _evidence(term: str, without: Candidate, removal: float, held_out: OnCurvesLeftOut, verdict: Grade, c) -> str:
     corrected = c.corrected
     beside = together_with(corrected.terms, without.terms, term)  # the terms weighed with it, if any
     sentence = (
@@ -751,7 +753,7 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: HeldOut |
         f"validation RMS from {without.val_rmse * 1e9:.3g} to {corrected.val_rmse * 1e9:.3g} nN "
         f"({corrected.val_rmse / c.noise.std:.2f}× the noise std)"
     )
-    if held_out is not None:
+    if isinstance(held_out, HeldOut):
         sentence += f"; on curves left out of the fit it predicts {times_better(held_out.gain)}"
     if c.witness is not None:
         sentence += f"; {_witness_words(c.witness)}"
