@@ -244,5 +244,17 @@ def _trend(apparent) -> str:
         return f"The plateau permeability cannot be compared across speeds (fewer than two fitted speeds{beside}). "
     return (
         f"The plateau permeability changes with speed by {apparent.slope:.2g} m² per decade "
-        f"({number(apparent.slope_significance, '.1f')} standard errors{beside}). "
+        f"({number(apparent.slope_significance, '.1f')} standard errors{_scatter(apparent)}{beside}). "
+    )
+
+
+def _scatter(apparent) -> str:
+    """How often the trend's standard errors arise with no trend, or why that is not known."""
+    if apparent.slope_dof < 1:
+        return ", of the plateaus' own noise: with two plateaus the scatter between curves is not measured"
+    p = apparent.slope_p_value
+    if not math.isfinite(p):
+        return ""
+    return (
+        f"; as many or more with no trend: p = {p:.2g}" if p >= 1e-4 else "; as many or more with no trend: p < 0.0001"
     )

@@ -36,7 +36,13 @@ def physics_stage(fit: PhysicsFit, samples: Samples, split: Split) -> dict:
 
 
 def apparent_record(apparent: ApparentPermeability) -> dict:
-    return {"plateau": apparent.plateau, "slope_per_decade": apparent.slope, "slope_std": apparent.slope_std}
+    return {
+        "plateau": apparent.plateau,
+        "slope_per_decade": apparent.slope,
+        "slope_std": apparent.slope_std,
+        "slope_dof": apparent.slope_dof,
+        "slope_p_value": apparent.slope_p_value,
+    }
 
 
 def per_curve_record(fits: dict[str, PhysicsFit], term: str) -> dict:
