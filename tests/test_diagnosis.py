@@ -577,7 +577,6 @@ def test_structure_left_is_unexplained_only_where_the_hybrid_twin_predicts_bette
     # On a 1 nN noise the chosen term's 0.5 nN: a twin at 0.49 nN does better by what a model error of 0.1 nN
     # would (0.5² − 0.49² < 0.15²), no more; at 0.3 nN it captures what the term leaves. The term passed the BIC
     # margin and the held-out test either way, so it is named, beside "unexplained" where structure is left.
-
     candidates = {
         (): candidate((), 2000.0, 1.0e-9, whiteness=50.0),
         ("a",): candidate(("a",), 1000.0, 0.5e-9, whiteness=8.0),  # above the test's 5: structure left
