@@ -68,6 +68,12 @@ class Case:
     proposes: bool = False  # confounded right also needs a proposed next experiment for the concealed term
     noise_in_meta: bool = False  # the noise std written in meta.yaml, as a lab that measured it writes it
 
+    @property
+    def noise_alone(self) -> bool:
+        """A null whose residual is noise alone under the base model: what the structure test's stated rate is of.
+        Replicates of differing stiffness (``stiffness_spread``) conceal no term but do leave structure."""
+        return not self.effects and not self.setting.get("stiffness_spread")
+
 
 ORIGINAL = [
     Case("null"),
@@ -390,7 +396,7 @@ def main() -> None:
     overrides = [f"pgd={args.pgd}", f"cache_dir={cache}", "figures=false"]
     for suite in SUITES if args.suite == "all" else [s for s in SUITES if s == args.suite]:
         cases = [c for c in SUITES[suite] if not args.only or any(word in c.name for word in args.only)]
-        rows, alarms = [], []
+        rows, named_on_nulls, alarms = [], [], []
         with tempfile.TemporaryDirectory() as scratch:
             for case in cases:
                 experiment = Experiment(effects=case.effects, **{"samples": args.samples, **case.setting})
@@ -403,6 +409,8 @@ def main() -> None:
                 d, seconds = diagnose(experiment, folder, overrides, case.noise_in_meta)
                 rows.append(row(case, experiment, d, seconds))
                 if not case.effects:
+                    named_on_nulls.append(bool(d["left_out"]))
+                if case.noise_alone:
                     alarms.append(d["mismatch"]["detected"] or bool(d["left_out"]))
                 print(f"{suite}: {case.name}: {rows[-1][2]} ({rows[-1][-1]}, {rows[-1][-2]:.1f} s)", flush=True)
         if suite == "loop":
@@ -410,7 +418,11 @@ def main() -> None:
         else:
             print_table(f"{suite} suite", rows)
             if alarms:
-                print(f"false alarms on the nulls: {sum(alarms)}/{len(alarms)} (the structure test's stated rate: 1%)")
+                print(
+                    f"false alarms on the nulls whose residual is noise alone: {sum(alarms)}/{len(alarms)} (the "
+                    f"structure test's stated rate: 1%); a term named on a null: {sum(named_on_nulls)}/"
+                    f"{len(named_on_nulls)}"
+                )
     if args.suite in ("bench-sets", "all"):
         with tempfile.TemporaryDirectory() as scratch:
             shared = run_sets(overrides, Path(scratch), args.only)
