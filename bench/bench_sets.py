@@ -14,9 +14,10 @@ and for ``none`` and ``terms`` the corrected K within 5 % of the truth (or the s
 
 ``make discover-bench`` runs them after its own suites (``python -m bench.discover_bench --suite
 bench-sets [--only NAME ...]``: them alone). ``--suite perturbed`` runs each set again as another seed
-of its family might have recorded it: every other sample (half the sampling rate), a third of every
-baseline cut off, the fastest curve left out (where three or more remain): the sets are a development
-set, and a verdict that holds only on their exact samples would not hold on the judged ones.
+of its family might have recorded it: every other sample (half the sampling rate), the samples between
+those (the same curves, the other half of their noise), a third of every baseline cut off, the fastest
+curve left out (where three or more remain): the sets are a development set, and a verdict that holds
+only on their exact samples would not hold on the judged ones.
 
 The sets are found beside the repository (``../shared/bench-sets``) or under ``$PTWIN_BENCH_SETS``;
 without them the suite says so in one line and is skipped.
@@ -139,7 +140,9 @@ def graded(name: str, truth: dict, d: dict, seconds: float) -> Graded:
 
 def perturbed(frame: pd.DataFrame, meta: dict):
     """(name, curves) of the set ``frame`` as other recordings of its family might be (module docstring)."""
-    yield "every other sample", frame[frame.groupby("curve", sort=False).cumcount() % 2 == 0]
+    order = frame.groupby("curve", sort=False).cumcount()
+    yield "every other sample", frame[order % 2 == 0]
+    yield "the samples between", frame[order % 2 == 1]
     keep = np.ones(len(frame), dtype=bool)
     for curve in frame["curve"].unique():
         baseline = np.flatnonzero((frame["curve"] == curve).to_numpy() & (frame["z"] < 0).to_numpy())
