@@ -219,10 +219,15 @@ def verdict(case: Case, experiment: Experiment, d: dict) -> bool:
         return abs(k) <= 0.05 and parameters_within(case, d)
     low, high = d["permeability"]["corrected_interval"]
     covers = low is not None and high is not None and low <= experiment.permeability <= high
-    groups = [g for g in d["confounded"] if set(expected) & set(g["terms"])]
+    groups = [g for g in d["confounded"] if set(expected) & group_terms(g)]
     weak = all(entry["confidence"] == "weak" for entry in d["left_out"])
     proposed = not case.proposes or any("next_experiment" in g for g in groups)
-    return weak and set(expected) <= {n for g in groups for n in g["terms"]} | set(named) and covers and proposed
+    return weak and set(expected) <= {n for g in groups for n in group_terms(g)} | set(named) and covers and proposed
+
+
+def group_terms(group: dict) -> set[str]:
+    """The terms of a confounded group, each of its subsets read term by term ("a + b" is a and b)."""
+    return {term for label in group["terms"] for term in label.split(" + ")}
 
 
 def relative_error(permeability: float | None, truth: float) -> float:

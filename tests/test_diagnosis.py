@@ -655,6 +655,30 @@ def test_a_residual_within_the_noise_as_a_whole_names_a_term_it_is_not_noise_in_
     assert not pick.detected and pick.preferred == () and pick.notes == []
 
 
+def test_a_pair_the_information_criterion_prefers_to_every_single_is_the_one_listed_beside_the_base_model():
+    # Nothing named (each subset within the noise in its own shape), but the pair a + b is 98 BIC below the best
+    # single: it is the one the data point to, so it is listed beside the base model (and K's interval covers its K,
+    # ``_rivals``); the realism suite's viscosity with a strain-dependent K under AR(1) noise listed a drag instead,
+    # K's interval missing the pair's K, the truth. A pair that does not beat its best single by the margin is not.
+    from ptwin.diagnosis.diagnose import DiagnosisSettings, _rivals
+    from ptwin.diagnosis.null import TermEvidence
+
+    candidates = {
+        (): candidate((), 2000.0, 1.0e-9),
+        ("a",): candidate(("a",), 1000.0, 0.7e-9),
+        ("b",): candidate(("b",), 1500.0, 0.8e-9),
+        ("a", "b"): candidate(("a", "b"), 900.0, 0.6e-9),
+    }
+    within = {label: TermEvidence(label, 30.0, 40.0, 3.0, 0.005) for label in ("a", "b", "a + b")}
+    pick = select(candidates, None, within, HELD_OUT_PASSES)
+    assert not pick.detected and pick.preferred == ("a", "b")
+    assert pick.notes[-1].startswith("a + b lowers the BIC by 785") and "listed beside the base model" in pick.notes[-1]
+    assert _rivals(candidates, pick, DiagnosisSettings(terms=[]), HELD_OUT_PASSES)[0] == ("a", "b")
+    candidates[("a", "b")] = candidate(("a", "b"), 995.0, 0.6e-9)  # 2 BIC above a alone
+    pick = select(candidates, None, within, HELD_OUT_PASSES)
+    assert pick.preferred == ("a",) and pick.notes[-1].startswith("a lowers the BIC by 686")
+
+
 def test_an_experiment_two_groups_share_is_said_once():
     from ptwin.diagnosis.words import _to_tell_apart
 

@@ -137,7 +137,7 @@ def fit_candidates(
         subsets = list(itertools.combinations(terms, size))
         forward = None  # the subset the forward step grows, from its optimum
         if size > 1 and best is not None and not best.leaves_structure(test) and not exhaustive:
-            preferred = _preferred(candidates, size - 1, bic_margin)
+            preferred = preferred_subsets(candidates, size - 1, bic_margin)
             if not base_within_noise:
                 forward = best if best.terms in preferred else None
                 preferred = [best.terms] if forward else []
@@ -231,7 +231,7 @@ def shape_evidence(candidates: dict, test: StructureTest) -> dict[str, TermEvide
     }
 
 
-def _preferred(candidates: dict, size: int, bic_margin: float) -> list[tuple[str, ...]]:
+def preferred_subsets(candidates: dict, size: int, bic_margin: float) -> list[tuple[str, ...]]:
     """The usable subsets of ``size`` terms, at values the field has (``PhysicsFit.plausible``), that beat every
     usable smaller subset by ``bic_margin``."""
     smaller = min((c.fit.bic for t, c in candidates.items() if len(t) < size and c.usable), default=math.inf)
