@@ -717,6 +717,34 @@ def test_a_proposal_that_brings_the_sets_first_hold_is_two_curves():
     assert ExperimentDesign._fewest(with_a_hold, hold) == 1
 
 
+def test_a_simulation_the_design_cannot_follow_is_tried_once(monkeypatch):
+    # A candidate too stiff for the simulator spends the whole budget on each try (10 s a protocol for a relaxation
+    # with no fluid force on a soft two-speed null), and the joint proposal and each group's ask the same protocols.
+    from types import SimpleNamespace
+
+    import ptwin.diagnosis.design as design
+    from ptwin.synth.simulator import Experiment, SimulationBudget
+
+    tries = []
+
+    def stiff(*args, **kwargs):
+        tries.append(args)
+        raise SimulationBudget(f"more than {design.BUDGET} evaluations of the force balance")
+
+    monkeypatch.setattr(design, "simulate_curve", stiff)
+    monkeypatch.setattr(design.ExperimentDesign, "_experiment", lambda self, fit: Experiment())
+    fields = ("meta", "speeds", "depth", "noise", "step", "free_travel", "make_model", "samples", "index")
+    planner = design.ExperimentDesign(**dict.fromkeys(fields))
+    fit, protocol = SimpleNamespace(), design.Protocol(15e-6, 0.6e-6, hold=1.0)
+    for _ in range(2):
+        with pytest.raises(SimulationBudget):
+            planner._simulate(fit, protocol)
+    assert len(tries) == 1
+    with pytest.raises(SimulationBudget):
+        planner._simulate(fit, design.Protocol(45e-6, 0.6e-6))  # another protocol is tried on its own
+    assert len(tries) == 2
+
+
 def test_a_proposed_speed_is_one_a_person_sets():
     from ptwin.diagnosis.design import _round_down
 

@@ -119,7 +119,7 @@ class ExperimentDesign:
     index: torch.Tensor
     smoothing: float = 0.05
     heldout_margin: float = 0.10  # the grade's held-out margin (``DiagnosisSettings``)
-    _simulated: dict = field(default_factory=dict, repr=False)  # (candidate, protocol) → CurveSimulation
+    _simulated: dict = field(default_factory=dict, repr=False)  # (candidate, protocol) → CurveSimulation or its error
     _refitted: dict = field(default_factory=dict, repr=False)  # (candidate, truth, protocol) → χ² refitted
 
     def propose(self, names: list[str], fits: list[PhysicsFit]) -> tuple[dict, Prediction] | None:
@@ -242,12 +242,22 @@ class ExperimentDesign:
         )
 
     def _simulate(self, fit: PhysicsFit, protocol: Protocol) -> CurveSimulation:
+        """``fit``'s curve under ``protocol``, simulated once; a simulation that fails fails once too (it is raised
+        again): a candidate the simulator cannot follow spends ``BUDGET`` on each try, and the joint proposal and each
+        group's ask for the same protocols (a soft two-speed null: a relaxation with no fluid force, 10 s a protocol,
+        ten failures where five say it all, 120 s of a 127 s diagnosis)."""
         key = (id(fit), protocol)
         if key not in self._simulated:
             e = replace(self._experiment(fit), base_speeds=(protocol.base_speed,), z_end=2 * protocol.to_depth + 1e-6)
             hold = Hold(protocol.to_depth, protocol.hold)
-            self._simulated[key] = simulate_curve(e, protocol.base_speed, hold=hold, balance=False, budget=BUDGET)
-        return self._simulated[key]
+            try:
+                self._simulated[key] = simulate_curve(e, protocol.base_speed, hold=hold, balance=False, budget=BUDGET)
+            except (RuntimeError, ValueError) as error:
+                self._simulated[key] = error
+        simulated = self._simulated[key]
+        if isinstance(simulated, Exception):
+            raise simulated
+        return simulated
 
     def _predict(self, names, fits: list[PhysicsFit], protocol: Protocol) -> Prediction:
         """Every candidate's prediction under ``protocol``, and their smallest difference at their current
