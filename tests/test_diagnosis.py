@@ -719,7 +719,7 @@ def test_a_proposal_that_brings_the_sets_first_hold_is_two_curves():
 
 def test_a_simulation_the_design_cannot_follow_is_tried_once(monkeypatch):
     # A candidate too stiff for the simulator spends the whole budget on each try (10 s a protocol for a relaxation
-    # with no fluid force on a soft two-speed null), and the joint proposal and each group's ask the same protocols.
+    # with no fluid force on a soft two-speed null), and the joint proposal and each group's own try the same ones.
     from types import SimpleNamespace
 
     import ptwin.diagnosis.design as design

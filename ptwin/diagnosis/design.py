@@ -242,10 +242,10 @@ class ExperimentDesign:
         )
 
     def _simulate(self, fit: PhysicsFit, protocol: Protocol) -> CurveSimulation:
-        """``fit``'s curve under ``protocol``, simulated once; a simulation that fails fails once too (it is raised
-        again): a candidate the simulator cannot follow spends ``BUDGET`` on each try, and the joint proposal and each
-        group's ask for the same protocols (a soft two-speed null: a relaxation with no fluid force, 10 s a protocol,
-        ten failures where five say it all, 120 s of a 127 s diagnosis)."""
+        """``fit``'s curve under ``protocol``, simulated once; a simulation that fails fails once too (its error is
+        raised again): a candidate the simulator cannot follow spends ``BUDGET`` on each try, and the joint proposal
+        and each group's own proposal try the same protocols (a soft two-speed null: a relaxation with no fluid force,
+        10 s a protocol, ten failures where five say it all, 120 s of a 127 s diagnosis)."""
         key = (id(fit), protocol)
         if key not in self._simulated:
             e = replace(self._experiment(fit), base_speeds=(protocol.base_speed,), z_end=2 * protocol.to_depth + 1e-6)
