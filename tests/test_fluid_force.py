@@ -77,7 +77,7 @@ def test_a_layer_at_another_permeability_shares_the_tables_and_owns_its_k(basis_
     assert torch.equal(other(velocity, radius, height), fresh(velocity, radius, height))
     with torch.no_grad():
         other.log_permeability += 1.0
-    assert layer.permeability.item() == pytest.approx(3e-16, rel=1e-14)
+    assert layer.permeability.item() == pytest.approx(3e-16, rel=1e-14, abs=0)
 
 
 def test_first_contact_follows_the_small_radius_law(basis_file):
@@ -86,7 +86,10 @@ def test_first_contact_follows_the_small_radius_law(basis_file):
     force = layer(torch.full_like(radius, 1e-5), radius, torch.full_like(radius, 6e-3))
     closed = force_coefficient(1e4) * 1e-3 * 1e-5 * radius**3 / 2e-16
     assert force[0] == 0
-    assert torch.allclose(force[1:], closed[1:], rtol=1e-2)
+    # The law's a³ to the digits; its coefficient to the tests' small basis's accuracy there, 1.4% under the closed
+    # form (the default basis 0.04%). torch.allclose's default atol of 1e-8 N let any force of these sizes pass.
+    assert (force[2] / force[1]).item() == pytest.approx(30.0**3, rel=1e-6)
+    assert torch.allclose(force[1:], closed[1:], rtol=2e-2, atol=0)
 
 
 def test_point_off_the_grid_is_refused_with_the_fix(basis_file):
