@@ -960,12 +960,38 @@ def test_k_gets_a_standard_error_only_where_its_interval_is_its_own_fit_s(monkey
 
     base, rival = candidate((), 1000.0, 1e-9), candidate(("a",), 1000.0, 1e-9)
     rival.fit.permeability, rival.fit.permeability_std = 1.7e-15, 1.5e-15
-    context = SimpleNamespace(corrected=base, candidates={(): base})
-    monkeypatch.setattr(diagnose, "_raw_interval", lambda *args: (math.log(2.5e-16), math.log(3.5e-16)))
+    context = SimpleNamespace(corrected=base, candidates={(): base}, samples=None, split=SimpleNamespace(train=None))
+    profiles = {id(base.fit): (2.5e-16, 3.5e-16), id(rival.fit): (6.6e-18, 4.3e-13)}
+    monkeypatch.setattr(diagnose, "profile_interval", lambda fit, *_: tuple(map(math.log, profiles[id(fit)])))
     alone = diagnose._permeability(context, [], unexplained=False)
     beside = diagnose._permeability(context, [rival], unexplained=False)
-    assert alone["corrected_std"] == 3e-17 and alone["corrected_interval"][1] == pytest.approx(3.5e-16)
+    assert alone["corrected_std"] == 3e-17 and alone["corrected_interval"][1] == pytest.approx(3.5e-16, rel=1e-9, abs=0)
     assert beside["corrected_std"] is None and beside["corrected_interval"][1] > 1.7e-15
+
+
+@pytest.mark.parametrize("rival_high", [2.17e-16, None])
+def test_k_s_interval_covers_each_rivals_own_profile_interval_not_its_wald_range(monkeypatch, rival_high):
+    # A weak power law on a soft cantilever (α 0.03, K 2e-16 m², seed 1), nothing named: the power law's K 1.5e-16
+    # with a Wald range in log K of [1.15e-16, 1.98e-16] and a profile interval of [1.19e-16, 2.17e-16]. The union
+    # of the rivals' Wald ranges missed the truth. A side a rival's profile leaves open leaves K's open.
+    import math
+    from types import SimpleNamespace
+
+    import ptwin.diagnosis.diagnose as diagnose
+
+    base, rival = candidate((), 1000.0, 1e-9), candidate(("a",), 1000.0, 1e-9)
+    base.fit.permeability, base.fit.permeability_std = 1.32e-16, 0.02e-16
+    rival.fit.permeability, rival.fit.permeability_std = 1.5e-16, 0.21e-16  # Wald: ×/÷ exp(1.96 · 0.14)
+    context = SimpleNamespace(corrected=base, candidates={(): base}, samples=None, split=SimpleNamespace(train=None))
+    profiles = {id(base.fit): (1.27e-16, 1.38e-16), id(rival.fit): (1.19e-16, rival_high)}
+    monkeypatch.setattr(
+        diagnose,
+        "profile_interval",
+        lambda fit, *_: tuple(None if side is None else math.log(side) for side in profiles[id(fit)]),
+    )
+    low, high = diagnose._permeability(context, [rival], unexplained=False)["corrected_interval"]
+    assert low == pytest.approx(1.19e-16, rel=1e-9, abs=0)
+    assert high == (None if rival_high is None else pytest.approx(2.17e-16, rel=1e-9, abs=0))
 
 
 def test_an_unexplained_k_that_ran_past_the_field_is_said_as_that_limit():

@@ -46,7 +46,7 @@ from ptwin.physics.terms import VOCABULARY
 
 FORMAT = "ptwin-diagnosis/2"
 CORRELATED = 0.95  # |correlation| with K worth a warning
-_LOG_FLOAT_MAX = math.log(1e300)  # a 95% range wider than this factor in K is unbounded
+_LOG_FLOAT_MAX = math.log(1e300)  # a bound of log K beyond this is none (and its exp would overflow)
 
 
 @dataclass
@@ -806,8 +806,10 @@ def _permeability_notes(fit: PhysicsFit, samples: Samples) -> list[str]:
     return [f"{note}." for note in notes if note]
 
 
-def _raw_interval(fit: PhysicsFit, raw_name: str, raw_std: float, c: _Context):
-    return profile_interval(fit, raw_name, raw_std, c.samples, c.split.train)
+def _permeability_interval(fit: PhysicsFit, c: _Context) -> tuple[float | None, float | None]:
+    """``fit``'s 95% profile interval of log K (None: a side the data do not close)."""
+    raw_std = fit.permeability_std / fit.permeability
+    return profile_interval(fit, PERMEABILITY, raw_std, c.samples, c.split.train)
 
 
 def _physical(candidates: dict, terms: tuple[str, ...]) -> bool:
@@ -874,8 +876,13 @@ def _float_or_none(value: float | None) -> float | None:
 
 def _permeability(c: _Context, alternatives: list[Candidate], unexplained: bool) -> dict:
     """K of the base and corrected models; the corrected model's 95% profile interval, widened to cover
-    the 95% range of K of every candidate that explains the data as well (so a K the data cannot fix
-    shows). With structure left unexplained no interval holds (the model misses the data), and no std."""
+    the 95% profile interval of K of every candidate that explains the data as well (so a K the data cannot fix
+    shows). With structure left unexplained no interval holds (the model misses the data), and no std.
+
+    A rival's own interval by its profile too, not its Wald range: where a term trades with K (a weak power law
+    on a soft cantilever, α 0.03 concealed, K 2e-16 m²: the power law's Wald range in log K [1.15e-16,
+    1.98e-16], its profile [1.19e-16, 2.17e-16]) the Wald range is the curvature at the fit, symmetric in log K
+    where the profile is not, and the union missed the truth."""
     corrected = c.corrected.fit
     if unexplained:
         return {
@@ -884,17 +891,12 @@ def _permeability(c: _Context, alternatives: list[Candidate], unexplained: bool)
             "corrected_std": None,
             "corrected_interval": [None, None],
         }
-    raw_std = corrected.permeability_std / corrected.permeability
-    low, high = _raw_interval(corrected, PERMEABILITY, raw_std, c)
-    interval = [_exp_or_none(low), _exp_or_none(high)]
-    for other in alternatives:  # the base model too, when it is a rival: its own 95% range (Wald, in log K)
-        k, spread = other.fit.permeability, 1.96 * other.fit.permeability_std / other.fit.permeability
-        bounded = spread < _LOG_FLOAT_MAX  # a wider range is no bound at all (and would overflow)
-        interval = [
-            None if interval[0] is None or not bounded else min(interval[0], k * math.exp(-spread)),
-            None if interval[1] is None or not bounded else max(interval[1], k * math.exp(spread)),
-        ]
-    interval = within(interval, PLAUSIBLE_PERMEABILITY)
+    low, high = _permeability_interval(corrected, c)
+    for other in alternatives:  # the base model too, when it is a rival
+        other_low, other_high = _permeability_interval(other.fit, c)
+        low = None if low is None or other_low is None else min(low, other_low)
+        high = None if high is None or other_high is None else max(high, other_high)
+    interval = within([_exp_or_none(low), _exp_or_none(high)], PLAUSIBLE_PERMEABILITY)
     return {
         "base": c.candidates[()].fit.permeability,
         "corrected": corrected.permeability,
