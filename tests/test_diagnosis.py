@@ -100,6 +100,18 @@ def test_baselines_that_read_the_noise_too_correlated_are_capped_by_what_the_res
     assert [entry["term"] for entry in diagnosis["left_out"]] == ["pore_pressure_relaxation"]
 
 
+def test_a_correlation_read_off_the_twins_residual_is_capped_by_what_the_residuals_show(demo_run):
+    # The demo's noise is white (κ² 1) and its baselines are short, so the correlation is read off the hybrid twin's
+    # residual in contact, which holds what the twin misses of the pore relaxation: κ² 9.1, every χ² 9× too lenient.
+    # The first fits' residuals cap it as they cap a baselines' reading (2.0 with the default basis).
+    from ptwin.data.noise import RESIDUAL
+    from ptwin.pipeline.run import CAPPED
+
+    noise = demo_run.diagnosis["noise"]
+    assert noise["source"] == f"{RESIDUAL}, {CAPPED}"
+    assert 1.0 <= noise["inflation"] < 3.0
+
+
 @pytest.mark.slow  # a whole run with every pair fitted: half a minute
 def test_a_drag_the_baselines_of_known_contacts_refute_is_not_named_in_a_pairs_place(tmp_path, coarse_cache):
     # A viscosity (γ 7.5) beside a strain-dependent K (m 1.4) in the shared p07's setting, contacts known: the

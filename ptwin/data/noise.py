@@ -59,7 +59,7 @@ STUCK = NOTHING + "half its second differences or more are zero (read for its no
 # noise (a simulation without noise, a force smoothed or exported to few digits): far below any instrument's
 # resolution (a 16–24-bit converter's step is 1e-5–1e-7 of its range), and no correlation can be fitted to it.
 ROUNDING = 1e-9
-RESIDUAL = "the hybrid twin's residual in contact (no baseline of 100 samples)"
+RESIDUAL = "hybrid twin's residual in contact (no baseline of 100 samples)"
 _MEMORIES = np.exp(-1.0 / np.geomspace(0.3, 300.0, 48))  # φ grid: correlation times 0.3–300 samples
 _SHARES = np.linspace(-0.5, 1.0, 61)  # c grid (anti-correlated cell noise has c·φ < 0)
 
