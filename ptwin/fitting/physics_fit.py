@@ -11,13 +11,14 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import torch
 from torch import nn
 
 from ptwin.data.tails import chi_square_exceeded
 from ptwin.fitting.baseline_line import BaselineLines, line_projection
+from ptwin.fitting.inflation_range import decided
 from ptwin.fitting.lm import FitError, LevenbergMarquardt, ParameterVector, covariance, evaluated_at
 from ptwin.physics.model import PERMEABILITY, PLAUSIBLE_PERMEABILITY, ForceModel
 from ptwin.physics.samples import Samples
@@ -92,6 +93,17 @@ class PhysicsFit:
     def usable(self) -> bool:
         """Physical and with every term still acting: a candidate explanation."""
         return self.physical and not self.degenerate
+
+    def under(self, inflation: float) -> PhysicsFit:
+        """This fit read under a noise of κ² ``inflation``: its optimum and decisions kept, its standard errors
+        scaled with κ. The fit that κ² would make where its decisions go the same way (``inflation_range``)."""
+        scale = math.sqrt(inflation / self.inflation)
+        return replace(
+            self,
+            inflation=inflation,
+            permeability_std=self.permeability_std * scale,
+            param_std={term: {p: std * scale for p, std in stds.items()} for term, stds in self.param_std.items()},
+        )
 
 
 def scaled_residual(model, samples: Samples, index: torch.Tensor, also: tuple[str, ...] = ()):
@@ -204,6 +216,18 @@ def fit_physics(
     )
 
 
+def _fixed_within_onset(std: float, correction: float, reach: float, inflation: float) -> bool:
+    """Whether a freed contact correction of ``correction`` ± ``std`` [m] (its standard error under a noise of κ²
+    ``inflation``) is fixed within the onset ``reach`` [m] (``_with_reference_contact``). Both conditions read κ²
+    through ``std`` (∝ κ), so each is recorded (``inflation_range.decided``) at the κ² where it would turn."""
+    within = std <= reach
+    reaching = abs(correction) - 1.96 * std <= reach
+    if 0.0 < std < math.inf:
+        decided(inflation, inflation * (reach / std) ** 2, within)
+        decided(inflation, inflation * (max(abs(correction) - reach, 0.0) / (1.96 * std)) ** 2, not reaching)
+    return within and reaching
+
+
 def _least_squares(model: ForceModel, samples: Samples, index: torch.Tensor, iterations: int, tolerance: float):
     """LM on the model's free parameters, left at the optimum: (their vector, the solver, θ)."""
     vector, residual = scaled_residual(model, samples, index)
@@ -254,8 +278,9 @@ def _with_reference_contact(
         std = max(variance[where, where].item(), 0.0) ** 0.5
     except FitError:
         freed, std = None, math.inf
-    reach = model.contact.reach
-    if freed is not None and (free or (std <= reach and abs(reference.item()) - 1.96 * std <= reach)):
+    if freed is not None and (
+        free or _fixed_within_onset(std, reference.item(), model.contact.reach, samples.noise_inflation)
+    ):
         return (*freed, linear)
     held[0].set(held[2])
     with torch.no_grad():
@@ -296,7 +321,9 @@ def _without_term(
     limit = terms[name].degenerate()
     if limit:
         return limit, chi_square
-    if change / samples.noise_inflation < 1.0:
+    below_noise = change / samples.noise_inflation < 1.0
+    decided(samples.noise_inflation, change, not below_noise)
+    if below_noise:
         return "its effect on the fitted curves is below the noise", chi_square
     return None, chi_square
 
@@ -457,8 +484,10 @@ def _moved_where_it_gains(held: PhysicsFit, later: list, samples, index, iterati
         return held
     if moved.physical != held.physical:
         return moved if moved.physical else held
-    gain = (held.chi_square - moved.chi_square) / held.inflation
-    return moved if gain > chi_square_exceeded(MOVE_FALSE_ALARM, 1) else held
+    quantile = chi_square_exceeded(MOVE_FALSE_ALARM, 1)
+    gains = (held.chi_square - moved.chi_square) / held.inflation > quantile
+    decided(held.inflation, (held.chi_square - moved.chi_square) / quantile, gains)
+    return moved if gains else held
 
 
 def _best(models, samples, index, iterations, reference_free) -> PhysicsFit:

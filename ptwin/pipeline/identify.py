@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import torch
 
+from ptwin.fitting.inflation_range import InflationRange, recorded
 from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, fit_physics, fit_with_starts
 from ptwin.fitting.pointwise import ApparentPermeability, apparent_permeability
@@ -30,6 +31,7 @@ class Identification:
     viscous: PhysicsFit | None  # stage 2, on the train split (None: the fit failed)
     viscous_per_curve: dict[str, PhysicsFit]
     viscous_term: str = VISCOUS.name
+    base_range: InflationRange | None = None  # the κ² over which ``base``'s decisions go the same way
 
 
 def identify(
@@ -41,14 +43,15 @@ def identify(
     iterations = optim.physics_fit.iterations
     progress("stage 1: global K (elastic + Darcy) and the pointwise apparent K(w)")
     try:
-        base = fit_with_starts(make_model, (), samples, train, iterations)
+        with recorded() as base_range:
+            base = fit_with_starts(make_model, (), samples, train, iterations)
     except FitError as error:
         raise UnsupportedSet(
             f"{prepared.recordings.path}: the base model cannot be fitted to these curves ({error}); check the "
             f"probe radius, spring constant and sample thickness in meta.yaml"
         ) from None
     if not chain:
-        return Identification(base, None, None, {})
+        return Identification(base, None, None, {}, base_range=base_range)
     p = optim.pointwise
     apparent = apparent_permeability(base.model, samples, base.permeability, p.iterations, p.plateau_from)
     progress("stage 2: Gauss–Newton on (K, gamma) with the viscous term, jointly and per speed")
@@ -59,7 +62,7 @@ def identify(
         progress(f"stage 2: the fit with {VISCOUS.name} failed ({error})")
         viscous = None
     per_curve = per_curve_fits(make_model, samples, train, terms, iterations)
-    return Identification(base, apparent, viscous, per_curve)
+    return Identification(base, apparent, viscous, per_curve, base_range=base_range)
 
 
 def per_curve_fits(

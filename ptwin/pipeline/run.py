@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
@@ -22,6 +23,7 @@ from ptwin.data.noise import (
 from ptwin.diagnosis.design import ExperimentDesign
 from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, FirstFits, diagnose, first_fits
 from ptwin.fitting.hybrid import HybridTwin
+from ptwin.fitting.inflation_range import InflationRange, recorded
 from ptwin.fitting.physics_fit import PhysicsFit
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
@@ -53,6 +55,8 @@ FLEXIBLE_DEGREE = 6
 # would be 1.44× the noise's, beyond what the structure test's model error tolerates.
 LOW_STD = 1.2
 CAPPED = "its correlation capped by what a model's residual in contact shows (a line removed per curve)"
+READ_UNDER_CAP = "the first fits read under it (no decision on the way to them turns between the two readings)"
+FITTED_UNDER_CAP = "the first fits made again under it"
 BASE_RESIDUAL = (
     f"base model's residual in contact, less a polynomial of degree {FLEXIBLE_DEGREE} in time per curve "
     "(no baseline of 100 samples)"
@@ -137,8 +141,9 @@ def diagnose_set(
     polynomial per curve (``FLEXIBLE_DEGREE``), and the base model refitted under it. Where the baselines or the
     twin's residual measured it, a reading above what the base model's and the single terms' residuals show
     (``first_fits``, fitted before anything is weighed) is capped (``_capped_by_residuals``), and those fits are
-    made again under the cap: what the twin misses of a term reads as correlation as a baseline's drift does (a
-    pore relaxation with a hold and a creep, white noise: κ² 18.0 off the twin's residual, 1.23 capped)."""
+    read under the cap, or made again where a decision on the way to them turns between the two readings
+    (``ptwin.fitting.inflation_range``): what the twin misses of a term reads as correlation as a baseline's drift
+    does (a pore relaxation with a hold and a creep, white noise: κ² 18.0 off the twin's residual, 1.23 capped)."""
     block, base_fit = settings.diagnosis.block, identification.base
     if twin is not None:
         measured = _on_twin_residual(prepared, twin, block)
@@ -152,18 +157,26 @@ def diagnose_set(
 
     iterations = settings.optim.physics_fit.iterations
 
-    def fitted_first(prepared: Prepared, base_fit: PhysicsFit | None) -> FirstFits:
-        reference, fitted = prepared.make_model.reference, None if base_fit is None else {(): base_fit}
+    def fitted_first(prepared: Prepared, fitted: dict[tuple[str, ...], PhysicsFit]) -> FirstFits:
+        reference = prepared.make_model.reference
         model, samples, split = prepared.make_model, prepared.samples, prepared.split
         return first_fits(model, samples, split, candidates, iterations, prepared.noise, reference, fitted, progress)
 
-    first = fitted_first(prepared, base_fit)
+    with recorded() as span:
+        first = fitted_first(prepared, {} if base_fit is None else {(): base_fit})
+    if base_fit is not None:
+        span = span & (identification.base_range or InflationRange(math.inf))
     # Read off the baselines or the twin's residual (σ stays the baselines'), κ² is capped by what the first fits'
     # residuals show; read off the base model's (no twin), σ was corrected by it and the two stay together.
     capped = None if measured is not None and twin is None else _capped_by_residuals(prepared, first, block)
     if capped is not None:
-        progress(f"the noise's block inflation is capped at {capped.noise.inflation:.3g} (a model's residual)")
-        prepared, first = capped, fitted_first(capped, None)
+        inflation = capped.noise.inflation
+        # Where no decision on the way to the first fits turns between the two readings, they are what the cap
+        # would fit again, read under it.
+        kept = {s: c.fit.under(inflation) for s, c in first.candidates.items() if c.fit is not None}
+        how = READ_UNDER_CAP if span.holds(inflation) else FITTED_UNDER_CAP
+        progress(f"the noise's block inflation is capped at {inflation:.3g} (a model's residual): {how}")
+        prepared, first = capped, fitted_first(capped, kept if how == READ_UNDER_CAP else {})
     return diagnose(
         prepared.make_model,
         prepared.samples,
