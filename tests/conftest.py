@@ -113,13 +113,13 @@ def simulated_set(folder: Path, **experiment) -> Path:
     return folder
 
 
-def run(folder, cache, output, *overrides, figures: bool = False) -> RunResult:
+def run(folder, cache, output, *overrides, figures: bool = False, progress=lambda line: None) -> RunResult:
     """The pipeline as train.py runs it, on the coarse basis; ``figures``: drawn, for the tests that read them
-    (the rest leave out 1.5–2.5 s of drawing a run)."""
+    (the rest leave out 1.5–2.5 s of drawing a run); ``progress`` sees its lines."""
     settings = settings_for(
         f"data.path={folder}", "pgd=coarse", f"cache_dir={cache}", f"figures={str(figures).lower()}", *overrides
     )
-    return run_pipeline(settings, output, progress=lambda line: None)
+    return run_pipeline(settings, output, progress=progress)
 
 
 @pytest.fixture(scope="session")

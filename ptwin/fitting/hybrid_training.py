@@ -1,8 +1,9 @@
 """Training the hybrid twin: one LM run per λ of the grid, λ chosen on the validation set.
 
 Every run starts from the same state (K from the regularised Newton, the network's
-seeded initialisation), so runs are independent and a resumed run repeats exactly what
-an uninterrupted one does. ``save`` receives a plain-dict state every
+seeded hidden layer), its output layer at the least-squares optimum of that λ's cost
+(``ErrorNetwork.fit_output``), so runs are independent and a resumed run repeats exactly
+what an uninterrupted one does. ``save`` receives a plain-dict state every
 ``checkpoint_every`` steps and after each λ; ``resume`` takes such a state back (one
 saved after the last λ resumes to the finished twin without training).
 """
@@ -68,6 +69,9 @@ def train_hybrid(
     for index in range(progress["lambda_index"], len(settings.regularisations)):
         regularisation = settings.regularisations[index]
         twin.load_state_dict(start, strict=False)
+        with torch.no_grad():
+            error = samples.force[train] - twin.physics(samples)[train]
+        twin.network.fit_output(samples, train, error, regularisation)
         _, residual = hybrid_residual(twin, samples, train, regularisation, names)
         rates = {n: settings.learning_rate[g] for g, members in groups.items() for n in members}
         solver = LevenbergMarquardt(residual, vector.get(), vector.expand(rates), settings.damping, residual.trace)
