@@ -196,8 +196,8 @@ def diagnose_set(
 def _on_twin_residual(prepared: Prepared, twin: HybridTwin, block: int) -> Prepared | None:
     """``prepared`` under the correlation of the twin's residual (``_residual_noise``, a line removed), or None.
     σ stays the baselines': what the twin leaves of a term is slow and reads as correlation (the demo's white
-    noise: κ² 9.1, 0.3 s), which would correct a second-difference σ upwards (``_uncorrected_std`` says where
-    it may read low)."""
+    noise: κ² 1.86, and 9.1 from a twin that stalled), which would correct a second-difference σ upwards
+    (``_uncorrected_std`` says where it may read low)."""
     noise = _residual_noise(prepared, twin.predict, block, 1, RESIDUAL)
     return None if noise is None else _rebuilt(prepared, prepared.fitted, noise)
 
