@@ -51,6 +51,7 @@ def lm_against_adam(regularisation: float = 1e-2, adam_steps: int = 5000) -> Non
     def fresh():
         twin = prepared.make_model.twin(base.permeability, noise, samples, train)
         newton_permeability(twin, samples, train, regularisation)
+        twin.start_network(samples, train, regularisation)  # where the twin's own runs start (``train_hybrid``)
         groups = twin.parameter_groups()
         return hybrid_residual(twin, samples, train, regularisation, groups["physics"] + groups["network"])
 

@@ -83,9 +83,7 @@ def test_the_networks_output_layer_starts_at_the_least_squares_optimum_of_the_tw
     _, p = prepared
     samples, train = p.samples, p.split.train
     twin = p.make_model.twin(3.0e-16, 3e-10, samples, train)
-    with torch.no_grad():
-        error = samples.force[train] - twin.physics(samples)[train]
-    twin.network.fit_output(samples, train, error, regularisation)
+    twin.start_network(samples, train, regularisation)
     names = ["network.layers.2.weight", "network.layers.2.bias"]
     vector, residual = hybrid_residual(twin, samples, train, regularisation, names)
     jacobian, r = residual.linearise(vector.get())

@@ -150,6 +150,13 @@ class HybridTwin(nn.Module):
         physics, correction = self(samples)
         return physics + correction
 
+    def start_network(self, samples: Samples, index: torch.Tensor, regularisation: float) -> None:
+        """The network's output layer at the least-squares optimum of the twin's cost on ``samples[index]`` under
+        ``regularisation`` (λ), the physics and the hidden layers as they are (``ErrorNetwork.fit_output``)."""
+        with torch.no_grad():
+            error = samples.force[index] - self.physics(samples)[index]
+        self.network.fit_output(samples, index, error, regularisation)
+
     def parameter_groups(self) -> dict[str, list[str]]:
         """Names of the parameters per group: the physics (K and any terms) and the network."""
         names = [n for n, _ in self.named_parameters()]

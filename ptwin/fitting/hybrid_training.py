@@ -69,9 +69,7 @@ def train_hybrid(
     for index in range(progress["lambda_index"], len(settings.regularisations)):
         regularisation = settings.regularisations[index]
         twin.load_state_dict(start, strict=False)
-        with torch.no_grad():
-            error = samples.force[train] - twin.physics(samples)[train]
-        twin.network.fit_output(samples, train, error, regularisation)
+        twin.start_network(samples, train, regularisation)
         _, residual = hybrid_residual(twin, samples, train, regularisation, names)
         rates = {n: settings.learning_rate[g] for g, members in groups.items() for n in members}
         solver = LevenbergMarquardt(residual, vector.get(), vector.expand(rates), settings.damping, residual.trace)
