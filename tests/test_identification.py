@@ -99,6 +99,30 @@ def test_the_networks_output_layer_starts_at_the_least_squares_optimum_of_the_tw
                 assert 0.5 * residual(moved).square().sum().item() > cost
 
 
+def test_a_singular_output_layer_at_no_regularisation_starts_at_its_least_norm_optimum(prepared):
+    # Two hidden units alike make the output layer's normal matrix singular at λ = 0: no traceback, the least-norm
+    # minimiser, which splits their weight evenly.
+    _, p = prepared
+    samples, train = p.samples, p.split.train
+    twin = p.make_model.twin(3.0e-16, 3e-10, samples, train)
+    hidden = twin.network.layers[0]
+    with torch.no_grad():
+        hidden.weight[1] = hidden.weight[0]
+        hidden.bias[1] = hidden.bias[0]
+    twin.start_network(samples, train, 0.0)
+    weight = twin.network.layers[2].weight[0]
+    assert torch.isfinite(weight).all()
+    assert weight[0].item() == pytest.approx(weight[1].item(), rel=1e-6, abs=0)
+
+
+@pytest.mark.parametrize("grid", ["[]", "[-1.0]", "[0.01,inf]"])
+def test_a_regularisation_grid_without_a_usable_lambda_is_one_line_naming_the_setting(grid):
+    from ptwin.app import SettingsError
+
+    with pytest.raises(SettingsError, match=r"^optim.hybrid.regularisations must list one λ ≥ 0 or more, got"):
+        settings_for(f"optim.hybrid.regularisations={grid}", "data.path=-", "cache_dir=-")
+
+
 def test_the_twin_fits_the_demo_to_its_noise_whatever_the_networks_seed(coarse_cache, tmp_path):
     # LM from the seeded output layer stalled on the demo at the coarse basis: test RMSE 2.3× the noise std at seed
     # 0, 1.4× at seed 2. From the output layer's least-squares optimum (``ErrorNetwork.fit_output``) every seed

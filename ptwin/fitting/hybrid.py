@@ -90,7 +90,10 @@ class ErrorNetwork(nn.Module):
             design = torch.cat([h, torch.ones_like(h[:, :1])], 1) * weight
             target = error / samples.noise_floor[index]
             normal = design.T @ design + regularisation * torch.eye(design.shape[1], dtype=design.dtype)
-            solution = torch.linalg.solve(normal, design.T @ target)
+            try:
+                solution = torch.linalg.solve(normal, design.T @ target)
+            except RuntimeError:  # singular at λ = 0 (hidden units that act alike): the least-norm optimum
+                solution = torch.linalg.lstsq(design, target[:, None], driver="gelsd").solution[:, 0]
             output.weight.copy_(solution[:-1][None, :])
             output.bias.copy_(solution[-1:])
 

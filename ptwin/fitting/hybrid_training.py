@@ -10,6 +10,7 @@ saved after the last λ resumes to the finished twin without training).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -30,6 +31,12 @@ class HybridSettings:
     newton_c1: float = 1.0
     newton_iterations: int = 30
     checkpoint_every: int = 10
+
+    def __post_init__(self):
+        if not self.regularisations or not all(0.0 <= value < math.inf for value in self.regularisations):
+            raise ValueError(
+                f"optim.hybrid.regularisations must list one λ ≥ 0 or more, got {list(self.regularisations)}"
+            )
 
 
 @dataclass
