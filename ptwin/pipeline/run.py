@@ -164,8 +164,8 @@ def diagnose_set(
 
     with recorded() as span:
         first = fitted_first(prepared, {} if base_fit is None else {(): base_fit})
-    if base_fit is not None:
-        span = span & (identification.base_range or InflationRange(math.inf))
+    if base_fit is not None:  # stage 1's, made before: its own range, or none where it was not recorded
+        span = span & (identification.base_range or InflationRange(low=math.inf))
     # Read off the baselines or the twin's residual (σ stays the baselines'), κ² is capped by what the first fits'
     # residuals show; read off the base model's (no twin), σ was corrected by it and the two stay together.
     capped = None if measured is not None and twin is None else _capped_by_residuals(prepared, first, block)
