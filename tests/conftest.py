@@ -44,6 +44,7 @@ def pytest_collection_modifyitems(items):
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
 
 
+DEMO = Path(__file__).resolve().parents[1] / "data" / "demo"  # the bundled demo set
 OPEN_DATA = Path(os.environ.get("PTWIN_OPEN_DATA", "-"))  # open_data/ of github.com/Jhko725/NeuralConstitutiveEq.jl
 
 
@@ -146,5 +147,4 @@ def viscous_run(tmp_path_factory, coarse_cache):
 
 @pytest.fixture(scope="session")
 def demo_run(tmp_path_factory, coarse_cache):
-    demo = Path(__file__).resolve().parents[1] / "data" / "demo"
-    return run(demo, coarse_cache, tmp_path_factory.mktemp("demo_run"), figures=True)
+    return run(DEMO, coarse_cache, tmp_path_factory.mktemp("demo_run"), figures=True)

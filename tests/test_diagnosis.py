@@ -7,7 +7,6 @@ import json
 import math
 import re
 import struct
-from pathlib import Path
 
 import pytest
 import torch
@@ -15,7 +14,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from ptwin.diagnosis.locate import whiteness
 from ptwin.fitting.split import Split
-from tests.conftest import run, simulated_set
+from tests.conftest import DEMO, run, simulated_set
 
 TRUE_K = 2.0e-16
 
@@ -120,10 +119,9 @@ def test_a_correlation_read_off_the_twins_residual_is_capped_by_what_the_residua
     from ptwin.data.noise import RESIDUAL
     from ptwin.pipeline.run import CAPPED, READ_UNDER_CAP
 
-    demo = Path(__file__).resolve().parents[1] / "data" / "demo"
     lines = []
     overrides = ("optim.hybrid.iterations=2", "diagnosis.design=false")
-    result = run(demo, coarse_cache, tmp_path, *overrides, progress=lines.append)
+    result = run(DEMO, coarse_cache, tmp_path, *overrides, progress=lines.append)
     noise = result.diagnosis["noise"]
     assert noise["source"] == f"{RESIDUAL}, {CAPPED}"
     assert 1.0 <= noise["inflation"] < 2.5

@@ -20,7 +20,7 @@ from ptwin.pipeline.identify import identify, per_curve_fits
 from ptwin.pipeline.prepare import prepare
 from ptwin.pipeline.run import _design
 from ptwin.synth.simulator import Experiment, simulate_curve
-from tests.conftest import settings_for, simulated_set
+from tests.conftest import DEMO, settings_for, simulated_set
 
 TRUE_K = 2.0e-16
 
@@ -129,9 +129,8 @@ def test_the_twin_fits_the_demo_to_its_noise_whatever_the_networks_seed(coarse_c
     # reaches it within 1.11×.
     from ptwin.pipeline.twin import train_twin
 
-    demo = Path(__file__).resolve().parents[1] / "data" / "demo"
     for seed in (0, 1, 2):
-        settings = settings_for(f"data.path={demo}", "pgd=coarse", f"cache_dir={coarse_cache}", f"seed={seed}")
+        settings = settings_for(f"data.path={DEMO}", "pgd=coarse", f"cache_dir={coarse_cache}", f"seed={seed}")
         p = prepare(settings, progress=lambda line: None)
         base = identify(p, settings.optim, progress=lambda line: None, chain=False).base
         outcome = train_twin(p, base.permeability, p.noise_floor, settings, tmp_path, progress=lambda line: None)

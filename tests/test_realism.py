@@ -6,7 +6,6 @@ import dataclasses
 import json
 import math
 import re
-from pathlib import Path
 
 import pytest
 import torch
@@ -16,7 +15,7 @@ from ptwin.physics.fluid_force import FluidInputError
 from ptwin.physics.terms import VOCABULARY
 from ptwin.synth.presets import SOFT_CANTILEVER
 from ptwin.synth.simulator import Experiment, simulate
-from tests.conftest import run
+from tests.conftest import DEMO, run
 
 SOFT = SOFT_CANTILEVER
 QUICK = ("optim.hybrid.regularisations=[1.0e-2]", "optim.hybrid.iterations=10")
@@ -119,7 +118,7 @@ def test_the_demo_read_with_its_contacts_to_estimate_finds_them_its_noise_and_it
     # The demo's approaches start 0.2 µm before contact, a twentieth of their travel. Read with contact_point:
     # estimate until stop 74, the first baseline ran into contact: contacts 395–410 nm late, noise 1.5–2.8 nN for
     # 0.3, κ² 45, and "No structure" in a set whose pore relaxation is named strong with the contacts known.
-    demo = load_recordings(Path(__file__).resolve().parents[1] / "data" / "demo")
+    demo = load_recordings(DEMO)
     write_recordings(tmp_path / "set", dataclasses.replace(demo.meta, contact_point="estimate"), demo.curves)
     outcome = run(tmp_path / "set", coarse_cache, tmp_path / "run", *QUICK)
     contacts = outcome.results["contact"]

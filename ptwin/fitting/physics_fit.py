@@ -484,9 +484,9 @@ def _moved_where_it_gains(held: PhysicsFit, later: list, samples, index, iterati
         return held
     if moved.physical != held.physical:
         return moved if moved.physical else held
-    quantile = chi_square_exceeded(MOVE_FALSE_ALARM, 1)
-    gains = (held.chi_square - moved.chi_square) / held.inflation > quantile
-    decided(held.inflation, (held.chi_square - moved.chi_square) / quantile, gains)
+    quantile, fall = chi_square_exceeded(MOVE_FALSE_ALARM, 1), held.chi_square - moved.chi_square
+    gains = fall / held.inflation > quantile
+    decided(held.inflation, fall / quantile, gains)
     return moved if gains else held
 
 

@@ -173,10 +173,13 @@ def diagnose_set(
         inflation = capped.noise.inflation
         # Where no decision on the way to the first fits turns between the two readings, they are what the cap
         # would fit again, read under it.
-        kept = {s: c.fit.under(inflation) for s, c in first.candidates.items() if c.fit is not None}
-        how = READ_UNDER_CAP if span.holds(inflation) else FITTED_UNDER_CAP
-        progress(f"the noise's block inflation is capped at {inflation:.3g} (a model's residual): {how}")
-        prepared, first = capped, fitted_first(capped, kept if how == READ_UNDER_CAP else {})
+        reread = span.holds(inflation)
+        kept = {s: c.fit.under(inflation) for s, c in first.candidates.items() if c.fit is not None} if reread else {}
+        progress(
+            f"the noise's block inflation is capped at {inflation:.3g} (a model's residual): "
+            f"{READ_UNDER_CAP if reread else FITTED_UNDER_CAP}"
+        )
+        prepared, first = capped, fitted_first(capped, kept)
     return diagnose(
         prepared.make_model,
         prepared.samples,
