@@ -115,14 +115,6 @@ def test_a_singular_output_layer_at_no_regularisation_starts_at_its_least_norm_o
     assert weight[0].item() == pytest.approx(weight[1].item(), rel=1e-6, abs=0)
 
 
-@pytest.mark.parametrize("grid", ["[]", "[-1.0]", "[0.01,inf]"])
-def test_a_regularisation_grid_without_a_usable_lambda_is_one_line_naming_the_setting(grid):
-    from ptwin.app import SettingsError
-
-    with pytest.raises(SettingsError, match=r"^optim.hybrid.regularisations must list one λ ≥ 0 or more, got"):
-        settings_for(f"optim.hybrid.regularisations={grid}", "data.path=-", "cache_dir=-")
-
-
 def test_the_twin_fits_the_demo_to_its_noise_whatever_the_networks_seed(coarse_cache, tmp_path):
     # LM from the seeded output layer stalled on the demo at the coarse basis: test RMSE 2.3× the noise std at seed
     # 0, 1.4× at seed 2. From the output layer's least-squares optimum (``ErrorNetwork.fit_output``) every seed

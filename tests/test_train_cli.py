@@ -4,6 +4,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+from ptwin.app import SettingsError
+from tests.conftest import settings_for
+
 ROOT = Path(__file__).parent.parent
 
 
@@ -53,9 +58,89 @@ def test_a_setting_that_composes_but_cannot_run_ends_with_one_line(tmp_path):
     assert "Traceback" not in result.stderr
 
 
+# A value out of its setting's range, and the start of the one line that refuses it. Each was run by train.py
+# before it was checked: a ZeroDivisionError, a broadcast error or an untyped ValueError ended in "unexpected …
+# please report it" (exit 3), and a negative damping, learning rate or tolerance, a plateau beyond the curve's
+# depth or a fit of no steps ran to a verdict on nonsense (a base model 113× the noise, no plateau K).
+OUT_OF_RANGE = [
+    ("optim.hybrid.regularisations=[]", "optim.hybrid.regularisations must be one λ ≥ 0 or more"),
+    ("optim.hybrid.regularisations=[-1.0]", "optim.hybrid.regularisations must be one λ ≥ 0 or more"),
+    ("optim.hybrid.regularisations=[0.01,inf]", "optim.hybrid.regularisations must be one λ ≥ 0 or more"),
+    ("optim.hybrid.iterations=-5", "optim.hybrid.iterations must be 0 or more"),
+    ("optim.hybrid.damping=-1", "optim.hybrid.damping must be LM's first damping, positive"),
+    ("optim.hybrid.tolerance=-1", "optim.hybrid.tolerance must be a relative fall"),
+    ("optim.hybrid.learning_rate.physics=0", "optim.hybrid.learning_rate must be a positive rate"),
+    ("optim.hybrid.newton_c1=-1", "optim.hybrid.newton_c1 must be 0 or more"),
+    ("optim.hybrid.newton_iterations=-1", "optim.hybrid.newton_iterations must be 0 or more"),
+    ("optim.hybrid.checkpoint_every=0", "optim.hybrid.checkpoint_every must be 1 or more"),
+    ("optim.physics_fit.iterations=0", "optim.physics_fit.iterations must be 1 or more"),
+    ("optim.pointwise.iterations=-1", "optim.pointwise.iterations must be 1 or more"),
+    ("optim.pointwise.plateau_from=1.5", "optim.pointwise.plateau_from must be a fraction"),
+    ("split.fractions=[0.5,0.5,0.5]", "split.fractions must be three positive numbers summing to 1"),
+    ("split.mode=sideways", "split.mode must be 'random' or 'curve'"),
+    ("data.smoothing=2", "data.smoothing must be a fraction from 0 to 1"),
+    ("model.hidden=0", "model.hidden must be 1 or more neurons"),
+    ("model.elastic_nodes=1", "model.elastic_nodes must be 2 or more"),
+    ("model.elastic_smoothing=-0.1", "model.elastic_smoothing must be a fraction"),
+    ("diagnosis.block=0", "diagnosis.block must be 1 or more samples"),
+    ("diagnosis.bic_margin=-1", "diagnosis.bic_margin must be 0 or more"),
+    ("diagnosis.heldout_margin=1", "diagnosis.heldout_margin must be a fraction"),
+    ("permeability=-1", "permeability must be a positive starting K"),
+]
+
+
+@pytest.mark.parametrize(("override", "line"), OUT_OF_RANGE, ids=[o for o, _ in OUT_OF_RANGE])
+def test_a_value_out_of_its_range_is_one_line_naming_the_setting(override, line):
+    with pytest.raises(SettingsError) as refused:
+        settings_for(override, "data.path=-", "cache_dir=-")
+    message = str(refused.value)
+    assert message.startswith(line) and "\n" not in message
+
+
+@pytest.mark.parametrize(
+    "override",
+    [
+        "optim.hybrid.iterations=0",
+        "optim.hybrid.regularisations=[0.0]",
+        "optim.hybrid.newton_iterations=0",
+        "model.elastic_smoothing=0",
+        "data.smoothing=0",
+        "diagnosis.block=1",
+        "optim.pointwise.plateau_from=0",
+        "model.elastic_nodes=2",
+    ],
+)
+def test_the_ends_of_each_range_are_settings_that_run(override):
+    settings_for(override, "data.path=-", "cache_dir=-")
+
+
+def test_out_of_range_at_the_command_line_is_exit_2_and_one_line(tmp_path):
+    result = run_train(tmp_path, "optim.hybrid.checkpoint_every=0")
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        "optim.hybrid.checkpoint_every must be 1 or more LM steps, e.g. 10; got 0"
+    ]
+
+
+def test_a_held_out_curve_the_set_lacks_is_one_line_naming_the_set(tmp_path, coarse_cache):
+    result = run_train(
+        tmp_path,
+        "pgd=coarse",
+        f"cache_dir={coarse_cache}",
+        "split.mode=curve",
+        "split.held_out_curve=v3",
+        "figures=false",
+    )
+    assert result.returncode == 2
+    last = result.stderr.strip().splitlines()[-1]
+    assert last.endswith(
+        "data/demo: split.held_out_curve 'v3' is not a fitted curve; pick one of ('v2', 'v8', 'v40', 'v80')"
+    )
+    assert "Traceback" not in result.stderr
+
+
 def test_the_basis_command_builds_where_train_py_looks(tmp_path):
     from ptwin.pgd.cache import cache_path, cached_basis
-    from tests.conftest import settings_for
 
     result = subprocess.run(
         [

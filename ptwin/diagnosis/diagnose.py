@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 import torch
 
+from ptwin.checks import refuse_outside
 from ptwin.data.noise import NoiseModel
 from ptwin.diagnosis.confidence import FoldFailed, Grade, HeldOut, OnCurvesLeftOut, grade, held_out_curves
 from ptwin.diagnosis.design import MAX_REPEATS, ExperimentDesign, Prediction
@@ -74,12 +75,14 @@ class DiagnosisSettings:
             unknown = [t for t in getattr(self, key) if t not in VOCABULARY]
             if unknown:
                 raise ValueError(f"diagnosis.{key}: unknown {unknown}; the vocabulary is {', '.join(VOCABULARY)}")
-        if self.max_terms < 0:
-            raise ValueError(f"diagnosis.max_terms must be ≥ 0, got {self.max_terms}")
-        if not 0.0 < self.false_alarm < 0.5:
-            raise ValueError(
-                f"diagnosis.false_alarm must be a probability below 0.5, e.g. 1.0e-3; got {self.false_alarm}"
-            )
+        rules = [
+            ("max_terms", self.max_terms >= 0, "0 or more, e.g. 2"),
+            ("bic_margin", 0.0 <= self.bic_margin < math.inf, "0 or more units of BIC, e.g. 10"),
+            ("heldout_margin", 0.0 <= self.heldout_margin < 1.0, "a fraction from 0 to below 1, e.g. 0.1"),
+            ("block", self.block >= 1, "1 or more samples, e.g. 50"),
+            ("false_alarm", 0.0 < self.false_alarm < 0.5, "a probability below 0.5, e.g. 1.0e-3"),
+        ]
+        refuse_outside("diagnosis", self, rules)
 
 
 def measured(permeability: float | None) -> float | None:

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import torch
 
+from ptwin.checks import refuse_outside
 from ptwin.fitting.hybrid import HybridTwin, hybrid_residual, newton_permeability
 from ptwin.fitting.lm import LevenbergMarquardt, ParameterVector, Step
 from ptwin.physics.samples import Samples
@@ -33,10 +34,26 @@ class HybridSettings:
     checkpoint_every: int = 10
 
     def __post_init__(self):
-        if not self.regularisations or not all(0.0 <= value < math.inf for value in self.regularisations):
-            raise ValueError(
-                f"optim.hybrid.regularisations must list one λ ≥ 0 or more, got {list(self.regularisations)}"
-            )
+        grid, rates = self.regularisations, self.learning_rate
+        rules = [
+            (
+                "regularisations",
+                bool(grid) and all(0.0 <= v < math.inf for v in grid),
+                "one λ ≥ 0 or more, e.g. [1.0e-2]",
+            ),
+            ("iterations", self.iterations >= 0, "0 or more LM steps a λ, e.g. 60"),
+            ("damping", 0.0 < self.damping < math.inf, "LM's first damping, positive, e.g. 1.0e-3"),
+            ("tolerance", 0.0 <= self.tolerance < 1.0, "a relative fall of the cost, from 0 to below 1, e.g. 1.0e-10"),
+            (
+                "learning_rate",
+                set(rates) == {"physics", "network"} and all(0.0 < r < math.inf for r in rates.values()),
+                "a positive rate for physics and for network, e.g. {physics: 0.5, network: 1.0}",
+            ),
+            ("newton_c1", 0.0 <= self.newton_c1 < math.inf, "0 or more, e.g. 1.0"),
+            ("newton_iterations", self.newton_iterations >= 0, "0 or more Newton steps, e.g. 30"),
+            ("checkpoint_every", self.checkpoint_every >= 1, "1 or more LM steps, e.g. 10"),
+        ]
+        refuse_outside("optim.hybrid", self, rules)
 
 
 @dataclass

@@ -34,6 +34,15 @@ class Split:
         return torch.cat([self.train, self.val]).sort().values
 
 
+def check_split(fractions, mode: str) -> None:
+    """``ValueError`` naming the setting where ``fractions`` are not three positive numbers summing to 1 or ``mode``
+    is neither 'random' nor 'curve'."""
+    if len(fractions) != 3 or min(fractions) <= 0 or abs(sum(fractions) - 1) > 1e-9:
+        raise ValueError(f"split.fractions must be three positive numbers summing to 1, got {list(fractions)}")
+    if mode not in ("random", "curve"):
+        raise ValueError(f"split.mode must be 'random' or 'curve', got {mode!r}")
+
+
 def split_samples(
     samples: Samples,
     fractions: tuple[float, float, float] = (0.70, 0.15, 0.15),
@@ -43,8 +52,7 @@ def split_samples(
 ) -> Split:
     """``mode='random'``: samples drawn by ``fractions``; ``mode='curve'``: the test set is the whole
     ``held_out_curve`` (default: the fastest) and train/val share the rest in the ratio of their fractions."""
-    if len(fractions) != 3 or min(fractions) <= 0 or abs(sum(fractions) - 1) > 1e-9:
-        raise ValueError(f"split.fractions must be three positive numbers summing to 1, got {list(fractions)}")
+    check_split(fractions, mode)
     generator = torch.Generator().manual_seed(seed)
     eligible = torch.nonzero(samples.fitted).squeeze(1)
 
@@ -56,8 +64,6 @@ def split_samples(
         n_train, n_val = int(fractions[0] * order.numel()), int(fractions[1] * order.numel())
         parts = order[:n_train], order[n_train : n_train + n_val], order[n_train + n_val :]
         return Split(*(p.sort().values for p in parts))
-    if mode != "curve":
-        raise ValueError(f"split.mode must be 'random' or 'curve', got {mode!r}")
     if held_out_curve is None:
         held_out_curve = samples.curve_ids[int(samples.curve[samples.base_speed.argmax()])]
     if held_out_curve not in samples.curve_ids:

@@ -143,7 +143,10 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     samples, noise = fitted_samples(fitted, noise, settings.device, reference)
     basis = cached_basis(settings.pgd, settings.cache_dir, progress)
     s = settings.split
-    split = split_samples(samples, tuple(s.fractions), s.mode, s.held_out_curve, settings.seed)
+    try:
+        split = split_samples(samples, tuple(s.fractions), s.mode, s.held_out_curve, settings.seed)
+    except ValueError as error:  # a held-out curve this set does not fit: the settings are checked on their own
+        raise RecordingError(f"{recordings.path}: {error}") from None
     # The reference's contact is the origin of depth: a fitted hold of its own gets no correction.
     contact_ids, onset = None, math.inf
     if meta.contact_point == "estimate":

@@ -5,11 +5,14 @@ value of the wrong type fails at the command line."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
+from ptwin.checks import refuse_outside
 from ptwin.diagnosis.diagnose import DiagnosisSettings
 from ptwin.fitting.hybrid import check_network
 from ptwin.fitting.hybrid_training import HybridSettings
+from ptwin.fitting.split import check_split
 from ptwin.pgd.config import PGDConfig
 from ptwin.physics.terms import VOCABULARY
 
@@ -18,6 +21,9 @@ from ptwin.physics.terms import VOCABULARY
 class DataSettings:
     path: str = "data/demo"  # the recording-set folder
     smoothing: float = 0.05  # velocity window, fraction of the approach's samples
+
+    def __post_init__(self):
+        refuse_outside("data", self, [("smoothing", 0.0 <= self.smoothing <= 1.0, "a fraction from 0 to 1, e.g. 0.05")])
 
 
 @dataclass
@@ -33,6 +39,12 @@ class ModelSettings:
 
     def __post_init__(self):
         check_network(self.inputs, self.activation)
+        rules = [
+            ("hidden", self.hidden >= 1, "1 or more neurons, e.g. the paper's 6"),
+            ("elastic_nodes", self.elastic_nodes >= 2, "2 or more depth nodes, e.g. 200"),
+            ("elastic_smoothing", 0.0 <= self.elastic_smoothing <= 1.0, "a fraction from 0 to 1, e.g. 0.05"),
+        ]
+        refuse_outside("model", self, rules)
 
 
 @dataclass
@@ -40,10 +52,20 @@ class PointwiseSettings:
     iterations: int = 40  # Newton steps of stage 1's K(w)
     plateau_from: float = 0.5  # fraction of a curve's depth where its K plateau starts
 
+    def __post_init__(self):
+        rules = [
+            ("iterations", self.iterations >= 1, "1 or more Newton steps, e.g. 40"),
+            ("plateau_from", 0.0 <= self.plateau_from < 1.0, "a fraction of the depth from 0 to below 1, e.g. 0.5"),
+        ]
+        refuse_outside("optim.pointwise", self, rules)
+
 
 @dataclass
 class PhysicsFitSettings:
     iterations: int = 60  # LM steps of every physics fit (global K, (K, gamma), candidates)
+
+    def __post_init__(self):
+        refuse_outside("optim.physics_fit", self, [("iterations", self.iterations >= 1, "1 or more LM steps, e.g. 60")])
 
 
 @dataclass
@@ -58,6 +80,9 @@ class SplitSettings:
     mode: str = "random"  # or "curve": hold out a whole curve as the test set
     fractions: list[float] = field(default_factory=lambda: [0.70, 0.15, 0.15])
     held_out_curve: str | None = None  # with mode=curve; default: the fastest
+
+    def __post_init__(self):
+        check_split(self.fractions, self.mode)
 
 
 @dataclass
@@ -76,6 +101,10 @@ class Settings:
     ckpt_path: str | None = None  # a checkpoint.pt to resume from
     permeability: float = 2.0e-16  # starting K [m²]
     figures: bool = True  # draw the PNG figures (false: tables, report and diagnosis only; 1.5–2.5 s less a set)
+
+    def __post_init__(self):
+        rules = [("permeability", 0.0 < self.permeability < math.inf, "a positive starting K [m²], e.g. 2.0e-16")]
+        refuse_outside("", self, rules)
 
 
 @dataclass
