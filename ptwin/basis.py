@@ -26,18 +26,18 @@ freeze_imports()
 def main(cfg: DictConfig) -> None:
     with one_line_errors(Path(HydraConfig.get().runtime.output_dir)):
         settings = typed(cfg)
-    config = settings.pgd
-    out = settings.out or cache_path(config, settings.cache_dir)
-    basis = build_basis(config)
-    basis.save(out)
-    stats = basis.stats
-    print(
-        f"saved {out}: {stats['modes_per_mesh']} modes, {stats['seconds']:.1f} s, "
-        f"peak memory {stats['peak_rss_bytes'] / 2**30:.2f} GiB, force ranks {stats['force_ranks']}"
-    )
-    report = verify(basis)
-    print(f"max relative force error vs closed form ({report['points']} points): {report['closed_form']:.2e}")
-    print(f"max relative force error vs direct solve of the same discrete problem: {report['discrete']:.2e}")
+        config = settings.pgd
+        out = settings.out or cache_path(config, settings.cache_dir)
+        basis = build_basis(config)
+        basis.save(out)
+        stats = basis.stats
+        print(
+            f"saved {out}: {stats['modes_per_mesh']} modes, {stats['seconds']:.1f} s, "
+            f"peak memory {stats['peak_rss_bytes'] / 2**30:.2f} GiB, force ranks {stats['force_ranks']}"
+        )
+        report = verify(basis)
+        print(f"max relative force error vs closed form ({report['points']} points): {report['closed_form']:.2e}")
+        print(f"max relative force error vs direct solve of the same discrete problem: {report['discrete']:.2e}")
 
 
 if __name__ == "__main__":

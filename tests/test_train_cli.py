@@ -61,7 +61,8 @@ def test_a_setting_that_composes_but_cannot_run_ends_with_one_line(tmp_path):
 # A value out of its setting's range, and the start of the one line that refuses it. Each was run by train.py
 # before it was checked: a ZeroDivisionError, a broadcast error or an untyped ValueError ended in "unexpected …
 # please report it" (exit 3), and a negative damping, learning rate or tolerance, a plateau beyond the curve's
-# depth or a fit of no steps ran to a verdict on nonsense (a base model 113× the noise, no plateau K).
+# depth or a fit of no steps ran to a verdict on nonsense (a base model 113× the noise, no plateau K). The pgd
+# ones ended python -m ptwin.basis in Hydra's traceback (exit 1).
 OUT_OF_RANGE = [
     ("optim.hybrid.regularisations=[]", "optim.hybrid.regularisations must be one λ ≥ 0 or more"),
     ("optim.hybrid.regularisations=[-1.0]", "optim.hybrid.regularisations must be one λ ≥ 0 or more"),
@@ -86,6 +87,10 @@ OUT_OF_RANGE = [
     ("diagnosis.bic_margin=-1", "diagnosis.bic_margin must be 0 or more"),
     ("diagnosis.heldout_margin=1", "diagnosis.heldout_margin must be a fraction"),
     ("permeability=-1", "permeability must be a positive starting K"),
+    ("pgd.plane.rings=0", "pgd.plane.rings must be 1 or more"),
+    ("pgd.thickness.finest=1", "pgd.thickness.finest must be the top element's thickness, between 0 and 1"),
+    ("pgd.enrichment.max_modes=0", "pgd.enrichment.max_modes must be 1 or more"),
+    ("pgd.richardson_order=0", "pgd.richardson_order must be positive"),
 ]
 
 

@@ -6,6 +6,8 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass, field
 
+from ptwin.checks import refuse_outside
+
 
 @dataclass
 class EnrichmentSettings:
@@ -17,6 +19,16 @@ class EnrichmentSettings:
     fixed_point_tol: float = 1e-8
     max_fixed_point_iterations: int = 25
     seed: int = 0
+
+    def __post_init__(self):
+        rules = [
+            ("max_modes", self.max_modes >= 1, "1 or more, e.g. 150"),
+            ("amplitude_tol", self.amplitude_tol >= 0.0, "0 or more, e.g. 1e-5"),
+            ("output_tol", self.output_tol >= 0.0, "0 or more, e.g. 1e-7"),
+            ("fixed_point_tol", self.fixed_point_tol >= 0.0, "0 or more, e.g. 1e-8"),
+            ("max_fixed_point_iterations", self.max_fixed_point_iterations >= 1, "1 or more, e.g. 25"),
+        ]
+        refuse_outside("pgd.enrichment", self, rules)
 
 
 @dataclass
@@ -36,6 +48,14 @@ class PlaneMesh:
     ring_density: float = 6.58
     edge_grading: float = 1.0
 
+    def __post_init__(self):
+        rules = [
+            ("rings", self.rings >= 1, "1 or more, e.g. 16"),
+            ("ring_density", self.ring_density > 0.0, "positive, e.g. 6.58"),
+            ("edge_grading", self.edge_grading > 0.0, "positive (1: rings evenly spaced), e.g. 1.0"),
+        ]
+        refuse_outside("pgd.plane", self, rules)
+
 
 @dataclass
 class ThicknessMesh:
@@ -43,6 +63,13 @@ class ThicknessMesh:
 
     nodes: int = 300
     finest: float = 1.0e-8
+
+    def __post_init__(self):
+        rules = [
+            ("nodes", self.nodes >= 3, "3 or more, e.g. 300"),
+            ("finest", 0.0 < self.finest < 1.0, "the top element's thickness, between 0 and 1, e.g. 1.0e-8"),
+        ]
+        refuse_outside("pgd.thickness", self, rules)
 
 
 @dataclass
@@ -71,6 +98,15 @@ class PGDConfig:
             grid = getattr(self, name)
             if not 0 < grid.minimum < grid.maximum or grid.nodes < 4:
                 raise ValueError(f"pgd.{name}: need 0 < minimum < maximum and nodes >= 4, got {grid}")
+        rules = [
+            ("richardson_order", self.richardson_order > 0.0, "positive, e.g. 2.0"),
+            (
+                "richardson",
+                not self.richardson or self.plane.rings >= 2,
+                "false where pgd.plane.rings < 2 (its mesh has half)",
+            ),
+        ]
+        refuse_outside("pgd", self, rules)
 
     @classmethod
     def from_dict(cls, values: dict) -> PGDConfig:

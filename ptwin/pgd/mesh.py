@@ -18,8 +18,6 @@ def unit_disc(rings: int, ring_density: float = 6.0, edge_grading: float = 1.0):
         nodes: (N, 2) coordinates; triangles: (T, 3) node indices;
         boundary: (N,) bool, True on the rim (P = 0 there).
     """
-    if rings < 1:
-        raise ValueError(f"pgd.plane.rings must be >= 1, got {rings}")
     points = [np.zeros((1, 2))]
     on_rim = [np.zeros(1, dtype=bool)]
     for k in range(1, rings + 1):
@@ -39,9 +37,5 @@ def graded_thickness(nodes: int, finest: float) -> np.ndarray:
     The pressure decays below the top over a depth ~R, i.e. Δφ ~ 1/x with x = H/R up
     to 1e5, so the spacing grows geometrically from ``finest`` at φ = 1 to the bottom.
     """
-    if nodes < 3:
-        raise ValueError(f"pgd.thickness.nodes must be >= 3, got {nodes}")
-    if not 0 < finest < 1:
-        raise ValueError(f"pgd.thickness.finest must lie in (0, 1), got {finest}")
     depth_below_top = np.concatenate([[0.0], np.geomspace(finest, 1.0, nodes - 1)])
     return np.sort(1.0 - depth_below_top)
