@@ -64,8 +64,19 @@ def test_synth_writes_a_loadable_set_and_its_truth_outside(tmp_path):
         (["--effect", "viscosity:gamma=1"], "TERM:PARAM=VALUE"),
         (["--effect", "solid_viscosity:gamma=abc"], "'abc' is not a number"),
         (["--effect", "solid_relaxation:g=0.2"], "missing parameter"),
+        # Each below ended in a traceback (IndexError, "scale < 0", "array must not contain infs or NaNs").
+        (["--effect", "solid_viscosity:gamma=-3"], r"is not physical \(gamma < 0\)"),
+        (["--effect", "pore_pressure_relaxation:M=-3"], r"is not physical \(M must be positive\)"),
+        (["--effect", "contact_offset:delta=5e-6"], r"is not physical \(\|delta\| ≥ rho/4"),
+        (["--samples", "0"], "--samples must be 20 or more"),
+        (["--noise", "-1"], "--noise must be 0 or more"),
+        (["--probe-radius", "0"], "--probe-radius must be positive"),
+        (["--speeds", "0", "2e-6"], "--speeds must be positive"),
+        (["--seed", "-1"], "--seed must be 0 or more"),
+        (["--noise-correlation", "1"], "--noise-correlation must be a lag-1 autocorrelation"),
+        (["--replicates", "0"], "--replicates must be 1 or more"),
     ],
 )
-def test_synth_refuses_bad_effects(tmp_path, arguments, message):
+def test_synth_refuses_bad_effects_and_options_out_of_range_in_one_line(tmp_path, arguments, message):
     with pytest.raises(SystemExit, match=message):
         main(["--out", str(tmp_path / "set"), "--truth", str(tmp_path / "truth.yaml"), *arguments])

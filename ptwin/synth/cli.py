@@ -24,7 +24,8 @@ from pathlib import Path
 
 import yaml
 
-from ptwin.data.recordings import write_recordings
+from ptwin.data.recordings import MIN_SAMPLES, write_recordings
+from ptwin.physics.terms import VOCABULARY
 from ptwin.synth.maps import MapLayout, write_map
 from ptwin.synth.simulator import EFFECTS, Experiment, Hold, simulate
 
@@ -74,6 +75,42 @@ def parse_effects(items: list[str], option: str = "--effect") -> dict[str, dict[
         except ValueError:
             raise SystemExit(f"{option} {item!r}: {value!r} is not a number") from None
     return effects
+
+
+def physical_effects(effects: dict[str, dict[str, float]], probe_radius: float, option: str = "--effect") -> None:
+    """``SystemExit`` with one line where a vocabulary term's values are outside its physical range (the range a
+    fit's ``Term.violation`` rejects, or a non-positive value of a parameter fitted in its log): the simulator would
+    integrate them to NaN."""
+    for term, values in effects.items():
+        if term not in VOCABULARY:
+            continue
+        try:
+            violation = VOCABULARY[term](probe_radius, **values).violation()
+        except ValueError:  # math.log of a log-parameter ≤ 0
+            violation = f"{', '.join(n for n, p in VOCABULARY[term].PARAMS.items() if p.log)} must be positive"
+        if violation:
+            raise SystemExit(f"{option} {term}: {values} is not physical ({violation})")
+
+
+def out_of_range(args: argparse.Namespace) -> str | None:
+    """The first option out of its range, in one line (option, what it must be, what it got), or None."""
+    positive = ("probe_radius", "spring_constant", "sample_thickness", "permeability", "effective_modulus", "spacing")
+    at_least_zero = ("noise", "stiffness_spread", "contact_error", "baseline_offset", "seed")
+    rules = [
+        *((name, getattr(args, name) > 0, "positive") for name in positive),
+        ("speeds", all(speed > 0 for speed in args.speeds), "positive [m/s]"),
+        ("samples", args.samples >= MIN_SAMPLES, f"{MIN_SAMPLES} or more a curve (recording-format.md's least)"),
+        ("sample_rate", args.sample_rate is None or args.sample_rate > 0, "positive [Hz]"),
+        ("z_end", args.z_end > max(args.z_start, 0.0), "beyond contact (z = 0) and --z-start [m]"),
+        *((name, getattr(args, name) >= 0, "0 or more") for name in at_least_zero),
+        ("noise_correlation", -1.0 < args.noise_correlation < 1.0, "a lag-1 autocorrelation between -1 and 1"),
+        ("noise_white_share", 0.0 <= args.noise_white_share <= 1.0, "a share from 0 to 1"),
+        ("replicates", args.replicates >= 1, "1 or more"),
+    ]
+    for name, fine, need in rules:
+        if not fine:
+            return f"--{name.replace('_', '-')} must be {need}; got {getattr(args, name)}"
+    return None
 
 
 def _parser(defaults: Experiment) -> argparse.ArgumentParser:
@@ -146,6 +183,12 @@ def main(argv: list[str] | None = None) -> None:
     args = _parser(defaults).parse_args(argv)
     if args.truth.resolve().is_relative_to(args.out.resolve()):
         raise SystemExit(f"--truth {args.truth}: keep the truth outside the recording folder {args.out}")
+    effects, region = parse_effects(args.effect), parse_effects(args.region_effect, "--region-effect")
+    physical_effects(effects, args.probe_radius)
+    physical_effects(region, args.probe_radius, "--region-effect")
+    refused = out_of_range(args)
+    if refused:
+        raise SystemExit(refused)
     try:
         experiment = Experiment(
             probe_radius=args.probe_radius,
@@ -171,7 +214,7 @@ def main(argv: list[str] | None = None) -> None:
             + parse_holds(args.creep, args.speeds if args.holds_only else None, creep=True)
             + proposed_holds(args.next_experiment),
             seed=args.seed,
-            effects=parse_effects(args.effect),
+            effects=effects,
         )
     except ValueError as error:
         raise SystemExit(str(error)) from None
@@ -181,7 +224,7 @@ def main(argv: list[str] | None = None) -> None:
                 *args.map,
                 args.spacing,
                 args.variation,
-                parse_effects(args.region_effect, "--region-effect"),
+                region,
                 region_radius=args.region_radius,
             )
         except ValueError as error:
