@@ -1,14 +1,16 @@
-"""A settings dataclass's refusal of a value out of its range, in one line that names the key, what it must be and
-what it got (``ptwin.app.typed`` turns it into exit code 2). Below every room: each room's settings use it."""
+"""A settings object's refusal of a value out of its range, in one line that names the key as the user writes it,
+what it must be and what it got (``ptwin.app.typed`` turns it into exit code 2, the synth's options into its exit).
+Below every room: each room's settings use it."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 
-def refuse_outside(group: str, settings: object, rules: Iterable[tuple[str, bool, str]]) -> None:
-    """``ValueError`` for the first of ``rules`` (key, whether its value is fine, what it must be, with an example)
-    that fails: "``group``.key must be …; got …" (``group`` "": a top-level key)."""
+def refuse_outside(settings: object, rules: Iterable[tuple[str, bool, str]], spelt: Callable[[str], str]) -> None:
+    """``ValueError`` for the first of ``rules`` (attribute of ``settings``, whether its value is fine, what it must
+    be, with an example) that fails: "<key> must be …; got …", the key as ``spelt`` writes the attribute's name
+    (``"optim.hybrid.{}".format`` for a config group, ``str`` at the top level, a command-line option)."""
     for key, fine, need in rules:
         if not fine:
-            raise ValueError(f"{group}{'.' if group else ''}{key} must be {need}; got {getattr(settings, key)}")
+            raise ValueError(f"{spelt(key)} must be {need}; got {getattr(settings, key)}")

@@ -102,6 +102,17 @@ def test_a_value_out_of_its_range_is_one_line_naming_the_setting(override, line)
     assert message.startswith(line) and "\n" not in message
 
 
+def test_the_map_and_inject_faces_refuse_out_of_range_in_the_same_words():
+    from ptwin.pipeline.settings import InjectSettings, MapSettings
+
+    with pytest.raises(ValueError, match=r"^map.workers must be 0 or more \(0: one per core\), e.g. 2; got -1$"):
+        MapSettings(workers=-1)
+    with pytest.raises(
+        ValueError, match=r"^inject.sizes must be positive multiples of the term's strength.*; got \[\]$"
+    ):
+        InjectSettings(sizes=[])
+
+
 @pytest.mark.parametrize(
     "override",
     [

@@ -82,7 +82,7 @@ class DiagnosisSettings:
             ("block", self.block >= 1, "1 or more samples, e.g. 50"),
             ("false_alarm", 0.0 < self.false_alarm < 0.5, "a probability below 0.5, e.g. 1.0e-3"),
         ]
-        refuse_outside("diagnosis", self, rules)
+        refuse_outside(self, rules, "diagnosis.{}".format)
 
 
 def measured(permeability: float | None) -> float | None:

@@ -53,7 +53,7 @@ class HybridSettings:
             ("newton_iterations", self.newton_iterations >= 0, "0 or more Newton steps, e.g. 30"),
             ("checkpoint_every", self.checkpoint_every >= 1, "1 or more LM steps, e.g. 10"),
         ]
-        refuse_outside("optim.hybrid", self, rules)
+        refuse_outside(self, rules, "optim.hybrid.{}".format)
 
 
 @dataclass

@@ -28,7 +28,7 @@ class EnrichmentSettings:
             ("fixed_point_tol", self.fixed_point_tol >= 0.0, "0 or more, e.g. 1e-8"),
             ("max_fixed_point_iterations", self.max_fixed_point_iterations >= 1, "1 or more, e.g. 25"),
         ]
-        refuse_outside("pgd.enrichment", self, rules)
+        refuse_outside(self, rules, "pgd.enrichment.{}".format)
 
 
 @dataclass
@@ -54,7 +54,7 @@ class PlaneMesh:
             ("ring_density", self.ring_density > 0.0, "positive, e.g. 6.58"),
             ("edge_grading", self.edge_grading > 0.0, "positive (1: rings evenly spaced), e.g. 1.0"),
         ]
-        refuse_outside("pgd.plane", self, rules)
+        refuse_outside(self, rules, "pgd.plane.{}".format)
 
 
 @dataclass
@@ -69,7 +69,7 @@ class ThicknessMesh:
             ("nodes", self.nodes >= 3, "3 or more, e.g. 300"),
             ("finest", 0.0 < self.finest < 1.0, "the top element's thickness, between 0 and 1, e.g. 1.0e-8"),
         ]
-        refuse_outside("pgd.thickness", self, rules)
+        refuse_outside(self, rules, "pgd.thickness.{}".format)
 
 
 @dataclass
@@ -106,7 +106,7 @@ class PGDConfig:
                 "false where pgd.plane.rings < 2 (its mesh has half)",
             ),
         ]
-        refuse_outside("pgd", self, rules)
+        refuse_outside(self, rules, "pgd.{}".format)
 
     @classmethod
     def from_dict(cls, values: dict) -> PGDConfig:

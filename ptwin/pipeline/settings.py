@@ -23,7 +23,9 @@ class DataSettings:
     smoothing: float = 0.05  # velocity window, fraction of the approach's samples
 
     def __post_init__(self):
-        refuse_outside("data", self, [("smoothing", 0.0 <= self.smoothing <= 1.0, "a fraction from 0 to 1, e.g. 0.05")])
+        refuse_outside(
+            self, [("smoothing", 0.0 <= self.smoothing <= 1.0, "a fraction from 0 to 1, e.g. 0.05")], "data.{}".format
+        )
 
 
 @dataclass
@@ -44,7 +46,7 @@ class ModelSettings:
             ("elastic_nodes", self.elastic_nodes >= 2, "2 or more depth nodes, e.g. 200"),
             ("elastic_smoothing", 0.0 <= self.elastic_smoothing <= 1.0, "a fraction from 0 to 1, e.g. 0.05"),
         ]
-        refuse_outside("model", self, rules)
+        refuse_outside(self, rules, "model.{}".format)
 
 
 @dataclass
@@ -57,7 +59,7 @@ class PointwiseSettings:
             ("iterations", self.iterations >= 1, "1 or more Newton steps, e.g. 40"),
             ("plateau_from", 0.0 <= self.plateau_from < 1.0, "a fraction of the depth from 0 to below 1, e.g. 0.5"),
         ]
-        refuse_outside("optim.pointwise", self, rules)
+        refuse_outside(self, rules, "optim.pointwise.{}".format)
 
 
 @dataclass
@@ -65,7 +67,9 @@ class PhysicsFitSettings:
     iterations: int = 60  # LM steps of every physics fit (global K, (K, gamma), candidates)
 
     def __post_init__(self):
-        refuse_outside("optim.physics_fit", self, [("iterations", self.iterations >= 1, "1 or more LM steps, e.g. 60")])
+        refuse_outside(
+            self, [("iterations", self.iterations >= 1, "1 or more LM steps, e.g. 60")], "optim.physics_fit.{}".format
+        )
 
 
 @dataclass
@@ -104,7 +108,7 @@ class Settings:
 
     def __post_init__(self):
         rules = [("permeability", 0.0 < self.permeability < math.inf, "a positive starting K [m²], e.g. 2.0e-16")]
-        refuse_outside("", self, rules)
+        refuse_outside(self, rules, str)
 
 
 @dataclass
@@ -116,8 +120,7 @@ class MapSettings:
     hybrid: bool = False  # train each spot's hybrid twin too (slow; its learned error joins the evidence)
 
     def __post_init__(self):
-        if self.workers < 0:
-            raise ValueError(f"map.workers must be ≥ 0 (0: one per core), got {self.workers}")
+        refuse_outside(self, [("workers", self.workers >= 0, "0 or more (0: one per core), e.g. 2")], "map.{}".format)
 
 
 @dataclass
@@ -157,8 +160,14 @@ class InjectSettings:
                 f"inject.values of {self.term} are its parameters in the order {names}: give {len(names)}, "
                 f"got {list(self.values)}"
             )
-        if not self.sizes or min(self.sizes) <= 0:
-            raise ValueError(f"inject.sizes must be positive multiples of the term's strength, got {list(self.sizes)}")
+        rules = [
+            (
+                "sizes",
+                bool(self.sizes) and min(self.sizes) > 0,
+                "positive multiples of the term's strength, e.g. [1, 2]",
+            )
+        ]
+        refuse_outside(self, rules, "inject.{}".format)
 
     def scaled(self, size: float) -> dict[str, float]:
         """The term's parameters by name, its strength (first parameter) times ``size``."""

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import yaml
 
+from ptwin.checks import refuse_outside
 from ptwin.data.recordings import MIN_SAMPLES, write_recordings
 from ptwin.physics.terms import VOCABULARY
 from ptwin.synth.maps import MapLayout, write_map
@@ -92,8 +93,8 @@ def physical_effects(effects: dict[str, dict[str, float]], probe_radius: float, 
             raise SystemExit(f"{option} {term}: {values} is not physical ({violation})")
 
 
-def out_of_range(args: argparse.Namespace) -> str | None:
-    """The first option out of its range, in one line (option, what it must be, what it got), or None."""
+def refuse_out_of_range(args: argparse.Namespace) -> None:
+    """``ValueError`` naming the first option out of its range (``ptwin.checks.refuse_outside``), as it is written."""
     positive = ("probe_radius", "spring_constant", "sample_thickness", "permeability", "effective_modulus", "spacing")
     at_least_zero = ("noise", "stiffness_spread", "contact_error", "baseline_offset", "seed")
     rules = [
@@ -107,10 +108,7 @@ def out_of_range(args: argparse.Namespace) -> str | None:
         ("noise_white_share", 0.0 <= args.noise_white_share <= 1.0, "a share from 0 to 1"),
         ("replicates", args.replicates >= 1, "1 or more"),
     ]
-    for name, fine, need in rules:
-        if not fine:
-            return f"--{name.replace('_', '-')} must be {need}; got {getattr(args, name)}"
-    return None
+    refuse_outside(args, rules, lambda name: "--" + name.replace("_", "-"))
 
 
 def _parser(defaults: Experiment) -> argparse.ArgumentParser:
@@ -186,10 +184,8 @@ def main(argv: list[str] | None = None) -> None:
     effects, region = parse_effects(args.effect), parse_effects(args.region_effect, "--region-effect")
     physical_effects(effects, args.probe_radius)
     physical_effects(region, args.probe_radius, "--region-effect")
-    refused = out_of_range(args)
-    if refused:
-        raise SystemExit(refused)
     try:
+        refuse_out_of_range(args)
         experiment = Experiment(
             probe_radius=args.probe_radius,
             spring_constant=args.spring_constant,
