@@ -400,19 +400,32 @@ def test_larger_subsets_are_fitted_only_while_the_best_smaller_one_leaves_struct
     assert starts[0] is None and all(base is not None and base.terms == () for base in starts[1:])
 
 
-@pytest.mark.parametrize(("single_chi_square", "pairs"), [(1000.0, [("a", "b"), ("a", "c")]), (1995.0, [])])
-def test_where_the_best_single_term_leaves_no_structure_it_is_grown_by_one_term(monkeypatch, single_chi_square, pairs):
+@pytest.mark.parametrize(
+    ("single_chi_square", "pair_chi_square", "pairs"),
+    [
+        (1000.0, 995.0, [("a", "b"), ("a", "c")]),
+        (1000.0, 900.0, [("a", "b"), ("a", "c"), ("b", "c")]),
+        (1995.0, 900.0, []),
+    ],
+)
+def test_where_the_best_single_term_leaves_no_structure_it_is_grown_by_one_term(
+    monkeypatch, single_chi_square, pair_chi_square, pairs
+):
     """The base model leaves structure (W 50 against 5) and every single term leaves none (W 2): a term can still
     hide beside a larger one (a pore relaxation beside a viscosity, the pore alone at M → ∞), so the best single,
-    686 BIC below the base model, is grown by one term each, and b + c is not fitted. Where no single term beats
-    the base model by the BIC margin, nothing is grown."""
+    686 BIC below the base model, is grown by one term each. Where no pair so grown beats it by the BIC margin
+    (χ² 995: 1.9 BIC above it), b + c is not fitted; where one does (χ² 900: 98 BIC below it), two terms are
+    needed and a may only stand in for one of them, so b + c is fitted too. Where no single term beats the base
+    model by the BIC margin, nothing is grown."""
     import ptwin.diagnosis.name as name
 
     fitted = []
 
     def fit_with_starts(make_model, subset, samples, index, iterations, base=None):
         fitted.append(subset)
-        chi_square = {(): 2000.0, ("a",): single_chi_square, ("b",): 1998.0, ("c",): 1998.0}.get(subset, 900.0)
+        chi_square = {(): 2000.0, ("a",): single_chi_square, ("b",): 1998.0, ("c",): 1998.0}.get(
+            subset, pair_chi_square
+        )
         fit = candidate(subset, chi_square, 1.0).fit
         fit.model = lambda samples: samples.force + len(subset)  # its residual tells its size
         return fit
