@@ -228,11 +228,20 @@ def _fixed_within_onset(std: float, correction: float, reach: float, inflation: 
     return within and reaching
 
 
+def physics_solver(
+    residual, theta: torch.Tensor, vector: ParameterVector, entries: torch.Tensor | None = None
+) -> LevenbergMarquardt:
+    """LM as the physics fits run it (``DAMPING_DECREASE``; log K moved at most ``LOG_PERMEABILITY_STEP`` a step) on θ,
+    the ``entries`` of ``vector`` (None: all of them)."""
+    limit = vector.expand({PERMEABILITY: LOG_PERMEABILITY_STEP}, default=math.inf)
+    limit = limit if entries is None else limit[entries]
+    return LevenbergMarquardt(residual, theta, decrease=DAMPING_DECREASE, step_limit=limit)
+
+
 def _least_squares(model: ForceModel, samples: Samples, index: torch.Tensor, iterations: int, tolerance: float):
     """LM on the model's free parameters, left at the optimum: (their vector, the solver, θ)."""
     vector, residual = scaled_residual(model, samples, index)
-    limit = vector.expand({PERMEABILITY: LOG_PERMEABILITY_STEP}, default=math.inf)
-    solver = LevenbergMarquardt(residual, vector.get(), decrease=DAMPING_DECREASE, step_limit=limit)
+    solver = physics_solver(residual, vector.get(), vector)
     theta = solver.run(iterations, tolerance, settled=SETTLED)
     vector.set(theta)
     return vector, solver, theta
