@@ -71,6 +71,8 @@ def test_synth_writes_a_loadable_set_and_its_truth_outside(tmp_path):
         (["--samples", "0"], "--samples must be 20 or more"),
         (["--noise", "-1"], "--noise must be 0 or more"),
         (["--probe-radius", "0"], "--probe-radius must be positive"),
+        # the radius first: read against 0 m the offset's range blamed the offset ("|delta| ≥ rho/4 = 0 m")
+        (["--probe-radius", "0", "--effect", "contact_offset:delta=1e-8"], "--probe-radius must be positive"),
         (["--speeds", "0", "2e-6"], "--speeds must be positive"),
         (["--seed", "-1"], "--seed must be 0 or more"),
         (["--noise-correlation", "1"], "--noise-correlation must be a lag-1 autocorrelation"),

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 
 import torch
@@ -229,7 +229,10 @@ def _fixed_within_onset(std: float, correction: float, reach: float, inflation: 
 
 
 def physics_solver(
-    residual, theta: torch.Tensor, vector: ParameterVector, entries: torch.Tensor | None = None
+    residual: Callable[[torch.Tensor], torch.Tensor],
+    theta: torch.Tensor,
+    vector: ParameterVector,
+    entries: torch.Tensor | None = None,
 ) -> LevenbergMarquardt:
     """LM as the physics fits run it (``DAMPING_DECREASE``; log K moved at most ``LOG_PERMEABILITY_STEP`` a step) on θ,
     the ``entries`` of ``vector`` (None: all of them)."""

@@ -181,11 +181,14 @@ def main(argv: list[str] | None = None) -> None:
     args = _parser(defaults).parse_args(argv)
     if args.truth.resolve().is_relative_to(args.out.resolve()):
         raise SystemExit(f"--truth {args.truth}: keep the truth outside the recording folder {args.out}")
+    try:
+        refuse_out_of_range(args)  # first: a term's physical range is read against --probe-radius
+    except ValueError as error:
+        raise SystemExit(str(error)) from None
     effects, region = parse_effects(args.effect), parse_effects(args.region_effect, "--region-effect")
     physical_effects(effects, args.probe_radius)
     physical_effects(region, args.probe_radius, "--region-effect")
     try:
-        refuse_out_of_range(args)
         experiment = Experiment(
             probe_radius=args.probe_radius,
             spring_constant=args.spring_constant,
