@@ -66,6 +66,22 @@ def test_the_profile_of_a_linear_model_is_the_textbook_interval_times_the_noise_
     assert high == pytest.approx(b + half, rel=1e-3)
 
 
+def test_a_side_searched_past_a_point_ends_where_the_whole_profile_ends_or_at_that_point():
+    # A model screened against an interval found already (``beyond``): where its profile reaches further, the side is
+    # the whole profile's; where it closes before the point, the point (one refit); an open side is not searched.
+    samples = line_samples()
+    fit, index = fitted_line(samples)
+    std = textbook_std(samples, fit)
+    low, high = profile_interval(fit, "b", std, samples, index)
+    b = fit.model.b.item()
+    inside = (b - 0.3 * (b - low), b + 0.3 * (high - b))
+    past = profile_interval(fit, "b", std, samples, index, beyond=inside)
+    assert past == pytest.approx((low, high), rel=0, abs=1e-3 * (high - low))
+    outside = (low - 0.1, high + 0.1)
+    assert profile_interval(fit, "b", std, samples, index, beyond=outside) == outside
+    assert profile_interval(fit, "b", std, samples, index, beyond=(-math.inf, math.inf)) == (None, None)
+
+
 class HeldContact(nn.Module):
     """A reference contact correction the fit holds (not a free parameter), within ``reach``."""
 
@@ -188,7 +204,31 @@ def test_a_bound_beyond_what_any_sample_has_is_no_bound():
     assert within([2.7e23, None], plausible) == [None, None]
 
 
-def test_each_profile_point_is_refitted_to_convergence_where_k_moves_far(tmp_path, coarse_cache, monkeypatch):
+@pytest.fixture(scope="module")
+def soft_pore(tmp_path_factory, coarse_cache):
+    """A pore relaxation (M 5e3 Pa) concealed on a soft cantilever (the realism suite's "pore, soft" at seed 3, the
+    coarse basis): (samples, train index, the base model's fit, the pore's), fitted as the diagnosis fits them."""
+    from ptwin.data.recordings import write_recordings
+    from ptwin.fitting.physics_fit import fit_with_starts
+    from ptwin.pipeline.prepare import prepare
+    from ptwin.synth.presets import SOFT_CANTILEVER
+    from ptwin.synth.simulator import Experiment, simulate
+    from tests.conftest import settings_for
+
+    folder = tmp_path_factory.mktemp("soft-pore") / "set"
+    concealed = Experiment(**SOFT_CANTILEVER, samples=1000, seed=3, effects={PORE: {"M": 5.0e3}})
+    write_recordings(folder, *simulate(concealed))
+    settings = settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}")
+    prepared = prepare(settings, lambda _: None)
+    samples, index, make_model = prepared.samples, prepared.split.train, prepared.make_model
+    base = fit_with_starts(make_model, (), samples, index, 60)
+    return samples, index, base, fit_with_starts(make_model, (PORE,), samples, index, 60, base)
+
+
+PORE = "pore_pressure_relaxation"
+
+
+def test_each_profile_point_is_refitted_to_convergence_where_k_moves_far(soft_pore, monkeypatch):
     # A pore relaxation on a soft cantilever (the realism suite's "pore, soft" at seed 3): its fit ends where it does
     # nearly nothing (M ~1e5 Pa), and toward small M each profile point moves K far from where the last left it.
     # Refitted with LM's defaults (damping decrease 1/3, no step limit on log K) for 20 iterations, the refits stopped
@@ -196,23 +236,28 @@ def test_each_profile_point_is_refitted_to_convergence_where_k_moves_far(tmp_pat
     # basis; 5.42e3 against 3.73e3 on the coarse one here): an interval narrower than the data say, on the side that
     # matters.
     import ptwin.diagnosis.intervals as intervals
-    from ptwin.data.recordings import write_recordings
     from ptwin.diagnosis.diagnose import parameter_interval
-    from ptwin.fitting.physics_fit import fit_with_starts
-    from ptwin.pipeline.prepare import prepare
-    from ptwin.synth.presets import SOFT_CANTILEVER
-    from ptwin.synth.simulator import Experiment, simulate
-    from tests.conftest import settings_for
 
-    term = "pore_pressure_relaxation"
-    concealed = Experiment(**SOFT_CANTILEVER, samples=1000, seed=3, effects={term: {"M": 5.0e3}})
-    write_recordings(tmp_path / "set", *simulate(concealed))
-    settings = settings_for(f"data.path={tmp_path / 'set'}", "pgd=coarse", f"cache_dir={coarse_cache}")
-    prepared = prepare(settings, lambda _: None)
-    samples, index, make_model = prepared.samples, prepared.split.train, prepared.make_model
-    base = fit_with_starts(make_model, (), samples, index, 60)
-    fit = fit_with_starts(make_model, (term,), samples, index, 60, base)
-    low, _ = parameter_interval(fit, term, "M", samples, index)
+    samples, index, _, fit = soft_pore
+    low, _ = parameter_interval(fit, PORE, "M", samples, index)
     monkeypatch.setattr(intervals, "REFIT", 400)
-    converged, _ = parameter_interval(fit, term, "M", samples, index)
+    converged, _ = parameter_interval(fit, PORE, "M", samples, index)
     assert low == pytest.approx(converged, rel=0.02, abs=0)
+
+
+def test_a_term_doing_nothing_at_its_fit_is_a_rival_where_its_k_s_interval_reaches_materially_further(soft_pore):
+    # The same set: the pore fitted at M ~1e5 Pa does nothing, its K is the base model's, and it counted as no rival;
+    # nothing was named and K's interval under the base model missed the truth (2e-16 m²). Under the pore model K's
+    # profile refits M, which acts where K is lower: the truth is inside.
+    import math
+
+    from ptwin.diagnosis.diagnose import _past_the_base_model
+    from ptwin.diagnosis.name import Candidate
+
+    samples, index, base, fit = soft_pore
+    assert fit.degenerate and fit.permeability == pytest.approx(base.permeability, rel=0.02, abs=0)
+    candidates = {(): Candidate((), base, 0.0, 0.0), (PORE,): Candidate((PORE,), fit, 0.0, 0.0)}
+    known = _past_the_base_model(candidates, [(PORE,)], samples, index)
+    (low, high), (pore_low, _) = (tuple(map(math.exp, known[()])), tuple(map(math.exp, known[(PORE,)])))
+    assert not low <= 2e-16 <= high
+    assert pore_low < 2e-16

@@ -211,9 +211,7 @@ def diagnose(
     notes += [f"{' + '.join(t) or 'base'}: {c.state}" for t, c in candidates.items() if c.without_effect]
     notes += _permeability_notes(candidates[pick.chosen].fit, samples) + _unsettled_notes(base, corrected)
     fit = _fit_table(samples, split, base, corrected, twin)
-    rivals = _rivals(candidates, pick, s, held_out)
-    unruled = [] if pick.unexplained else _not_ruled_out(candidates, chosen)
-    notes += [_not_ruled_out_words(candidates, chosen, larger) for larger in unruled]
+    rivals, unruled, known = _alternatives(candidates, pick, s, held_out, samples, split.train)
     confounds = [_confound(chosen, other, candidates) for other in rivals]
     predictions = _tell_apart(confounds, rivals, corrected, candidates, design, progress) if design is not None else []
     progress("diagnosis: the named terms on curves left out of the fit, and intervals under the noise model")
@@ -229,6 +227,7 @@ def diagnose(
     if design is not None and not pick.unexplained:  # no recording makes a term strong beside unexplained structure
         predictions += _make_strong(left_out, chosen, candidates, design, progress)
     left_out.sort(key=lambda entry: -entry["test_rmse_gain"])
+    permeability, widened = _permeability(context, rivals, pick.unexplained, unruled, known)
     diagnosis = Diagnosis(
         detected=pick.detected,
         summary="",
@@ -242,8 +241,8 @@ def diagnose(
         whiteness={"base": base.whiteness, "corrected": corrected.whiteness},
         fit=fit,
         noise=noise,
-        permeability=_permeability(context, [candidates[t] for t in [*rivals, *unruled]], pick.unexplained),
-        notes=notes,
+        permeability=permeability,
+        notes=notes + widened,
         predictions=predictions,
         evidence=evidence,
         alone={term: _alone_interval(term, context, test) for term in s.profiled if _physical(candidates, (term,))},
@@ -539,7 +538,8 @@ def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings, held_out: 
     information criterion alone prefers and the single terms that explain the data as well as the base
     model does, with values samples of the field have (K among them: ``PhysicsFit.plausible``), but with a
     materially different K (K is then not fixed by the data; a K of 1e25 m² beside a strain-dependent
-    permeability, or m = 2800, is no rival, only a degenerate parametrisation)."""
+    permeability, or m = 2800, is no rival, only a degenerate parametrisation). Those whose K differs only within
+    their profile intervals join them later (``_past_the_base_model``)."""
     if pick.chosen:
         return confounded(candidates, pick.chosen, s.bic_margin, held_out)
     if pick.unexplained:
@@ -557,35 +557,72 @@ def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings, held_out: 
     ]
 
 
-def _not_ruled_out(candidates: dict, chosen: tuple[str, ...]) -> list[tuple[str, ...]]:
-    """The chosen subset with one term more, usable at values the field has, that the information criterion
-    prefers though the selection pruned the extra term (short of the BIC margin or the held-out test), with a
-    materially different K (``_other_permeability``): the data do not rule it out, so K's interval covers its
-    K. In the bench-sets' p07 setting a pore relaxation (M 5e4) beside a power law (α 0.1) was pruned from the
-    pair 8.5 BIC below the power law alone: the power law's K was 3.43e-16 m² in [3.39e-16, 3.46e-16], the
-    pair's 3.01e-16, the truth 3e-16."""
-    if not chosen:
-        return []
+def _alternatives(
+    candidates: dict, pick: _Selection, s: DiagnosisSettings, held_out: HeldOutTest, samples: Samples, index
+) -> tuple[list[tuple[str, ...]], list[tuple[str, ...]], dict]:
+    """The rivals of the chosen subset (``_rivals``, and beside nothing named ``_past_the_base_model``'s), the larger
+    subsets not ruled out whose K's interval ``_permeability`` screens (``_not_ruled_out``), and the K intervals
+    found on the way (log K, by subset)."""
+    rivals = _rivals(candidates, pick, s, held_out)
+    unruled = [t for t in _not_ruled_out(candidates, pick.chosen, s.bic_margin) if t not in rivals]
+    if pick.chosen or pick.unexplained:
+        return rivals, unruled, {}
+    known = _past_the_base_model(candidates, unruled, samples, index)  # beside nothing named: rivals or nothing
+    return rivals + [t for t in known if t and t not in rivals], [], known
+
+
+def _past_the_base_model(
+    candidates: dict, singles: list[tuple[str, ...]], samples: Samples, index: torch.Tensor
+) -> dict[tuple[str, ...], tuple[float | None, float | None]]:
+    """Nothing named: K's interval under the base model (log K, by ``()``) and each of ``singles`` (not ruled out:
+    ``_not_ruled_out``) whose K's interval reaches materially past it (``_reaching``), which is a rival as one with
+    another K at its fit is (``_rivals``): it explains the data as well, and it would have them say another K. A
+    pore relaxation concealed on a soft cantilever (M 5e3 Pa) was fitted at M 1.2e5, below the noise, K as the
+    base model's, and counted as no rival; its profile refits M, which acts where K is lower: K's interval under
+    the pore [1.89e-16, 2.51e-16] m², under the base model [2.21e-16, 2.51e-16], the truth 2e-16."""
+    base = candidates[()].fit
+    known = {(): _permeability_interval(base, samples, index)}
+    return known | _reaching(candidates, singles, known[()], base.permeability, samples, index)
+
+
+def _not_ruled_out(candidates: dict, chosen: tuple[str, ...], bic_margin: float) -> list[tuple[str, ...]]:
+    """The chosen subset with one term more (a single beside nothing named), physical and at values the field has,
+    that the information criterion does not rule out: within ``bic_margin`` of the chosen subset, the extra term
+    pruned by the selection or never proven. K's interval covers its K's profile interval where that reaches
+    further (``_permeability``): the data do not rule it out. In the bench-sets' p07 setting a pore relaxation (M
+    5e4) beside a power law (α 0.1) was pruned from the pair 8.5 BIC below the power law alone: the power law's K
+    was 3.43e-16 m² in [3.39e-16, 3.46e-16], the pair's 3.01e-16, the truth 3e-16. A term doing nothing at its fit
+    counts too: its K's profile refits its strength, which may act where K moves (a pore relaxation concealed on a
+    soft cantilever, nothing named: M 1.2e5 Pa, below the noise, 4.9 BIC above the base model; base K's interval
+    [2.21e-16, 2.51e-16], the pore's [1.87e-16, 2.51e-16], the truth 2e-16)."""
     fit = candidates[chosen].fit
     return [
         t
         for t, c in candidates.items()
         if len(t) == len(chosen) + 1
         and set(chosen) < set(t)
-        and c.usable
+        and c.fit is not None
+        and c.fit.physical
         and c.fit.plausible
-        and c.fit.bic < fit.bic
-        and _other_permeability(c.fit, fit)
+        and c.fit.bic - fit.bic < bic_margin
     ]
 
 
-def _not_ruled_out_words(candidates: dict, chosen: tuple[str, ...], larger: tuple[str, ...]) -> str:
+def _not_ruled_out_words(candidates: dict, chosen: tuple[str, ...], larger: tuple[str, ...], interval) -> str:
+    """Why K's interval reaches ``interval`` [m²] (low, high; None: open), K's under ``larger``."""
     (extra,) = set(larger) - set(chosen)
     fit, other = candidates[chosen].fit, candidates[larger].fit
+    low, high = (f"{side:.3g}" if side is not None else "open" for side in interval)
+    weighed = (
+        f"the information criterion prefers it by {fit.bic - other.bic:.1f} BIC"
+        if other.bic < fit.bic
+        else f"{other.bic - fit.bic:.1f} BIC above {' + '.join(chosen) or 'the base model'}, within the margin"
+    )
     return (
-        f"K's interval covers K of {' + '.join(larger)} ({other.permeability:.3g} m² against "
-        f"{fit.permeability:.3g}): the information criterion prefers it by {fit.bic - other.bic:.1f} BIC, "
-        f"though {extra} is not proven beside {' + '.join(chosen)} (above), so the data do not rule it out"
+        f"K's interval covers K's 95% interval under {' + '.join(larger)} ({low} to {high} m², at its fit "
+        f"{other.permeability:.3g} against {fit.permeability:.3g}): {weighed}, though {extra} is not proven"
+        + f" beside {' + '.join(chosen)}" * bool(chosen)
+        + ", so the data do not rule it out"
     )
 
 
@@ -810,16 +847,46 @@ def _permeability_notes(fit: PhysicsFit, samples: Samples) -> list[str]:
     return [f"{note}." for note in notes if note]
 
 
-def _permeability_interval(fit: PhysicsFit, c: _Context) -> tuple[float | None, float | None]:
-    """``fit``'s 95% profile interval of log K (None: a side the data do not close), widened by what its fluid layer
-    may be off the exact Darcy force (``closed_form_error``, ε): the force is ∝ 1/K, so a force (1 + δ) times the
-    exact one, |δ| ≤ ε, gives a K (1 + δ) times the exact one's. The noise alone fixes K more tightly than that on
-    stiff sets: on discover-bench's nulls, K 0.009% (one std) from its fit against the default basis's ε of
-    0.020% (its force 0.018% low at the median), and K's 95% interval covered the truth on 15 of 30 seeds."""
+def _permeability_interval(
+    fit: PhysicsFit, samples: Samples, index: torch.Tensor, beyond: tuple[float, float] | None = None
+) -> tuple[float | None, float | None]:
+    """``fit``'s 95% profile interval of log K on ``samples[index]`` (None: a side the data do not close), widened by
+    what its fluid layer may be off the exact Darcy force (``closed_form_error``, ε): the force is ∝ 1/K, so a force
+    (1 + δ) times the exact one, |δ| ≤ ε, gives a K (1 + δ) times the exact one's. The noise alone fixes K more
+    tightly than that on stiff sets: on discover-bench's nulls, K 0.009% (one std) from its fit against the default
+    basis's ε of 0.020% (its force 0.018% low at the median), and K's 95% interval covered the truth on 15 of 30
+    seeds. ``beyond``: an interval of log K found already (widened as this one; ±inf: open), each side searched past
+    it only (``profile_interval``)."""
     raw_std = fit.permeability_std / fit.permeability
-    low, high = profile_interval(fit, PERMEABILITY, raw_std, c.samples, c.split.train)
     error = closed_form_error(fit.model.fluid.basis)
+    raw = (None, None) if beyond is None else (beyond[0] + math.log1p(error), beyond[1] + math.log1p(-error))
+    low, high = profile_interval(fit, PERMEABILITY, raw_std, samples, index, beyond=raw)
     return (None if low is None else low - math.log1p(error), None if high is None else high - math.log1p(-error))
+
+
+def _reaching(
+    candidates: dict, subsets: list[tuple[str, ...]], interval: tuple, reference: float, samples: Samples, index
+) -> dict[tuple[str, ...], tuple[float | None, float | None]]:
+    """The ``subsets`` whose K's profile interval reaches past ``interval`` (log K, widened; None: open) by more than
+    ``MATERIAL`` of K ``reference`` [m²] (a difference a user would act on), each with that interval's part past
+    it (each side searched only past ``interval``: one refit a side where it reaches no further)."""
+    found = {}
+    for terms in subsets:
+        low, high = interval
+        past = (-math.inf if low is None else low, math.inf if high is None else high)
+        other = _permeability_interval(candidates[terms].fit, samples, index, beyond=past)
+        if _further(interval, other, reference):
+            found[terms] = other
+    return found
+
+
+def _further(interval: tuple, other: tuple, reference: float) -> bool:
+    """Whether ``other`` (log K; None: open) reaches past ``interval`` by more than ``MATERIAL`` of ``reference``."""
+    low, high = (_exp_or_none(side) for side in interval)
+    other_low, other_high = (_exp_or_none(side) for side in other)
+    lower = low is not None and (other_low is None or low - other_low > MATERIAL * reference)
+    higher = high is not None and (other_high is None or other_high - high > MATERIAL * reference)
+    return lower or higher
 
 
 def _physical(candidates: dict, terms: tuple[str, ...]) -> bool:
@@ -884,34 +951,45 @@ def _float_or_none(value: float | None) -> float | None:
     return None if value is None else float(value)
 
 
-def _permeability(c: _Context, alternatives: list[Candidate], unexplained: bool) -> dict:
-    """K of the base and corrected models; the corrected model's 95% profile interval, widened to cover
-    the 95% profile interval of K of every candidate that explains the data as well (so a K the data cannot fix
-    shows). With structure left unexplained no interval holds (the model misses the data), and no std.
+def _permeability(
+    c: _Context, alternatives: list[tuple[str, ...]], unexplained: bool, reach: list[tuple[str, ...]], known: dict
+) -> tuple[dict, list[str]]:
+    """K of the base and corrected models; the corrected model's 95% profile interval, widened to cover the 95%
+    profile interval of K of every candidate that explains the data as well (``alternatives``, so a K the data cannot
+    fix shows), and K's under each subset of ``reach`` that reaches materially further (``_reaching``). ``known``:
+    intervals found already (log K, by subset; a rival's part past the base model's is all its union needs). The
+    notes returned beside say each interval that reached past the fit's own (``known``'s, ``reach``'s). With
+    structure left unexplained no interval holds (the model misses the data), and no std.
 
     A rival's own interval by its profile too, not its Wald range: where a term trades with K (a weak power law
     on a soft cantilever, α 0.03 concealed, K 2e-16 m²: the power law's Wald range in log K [1.15e-16,
     1.98e-16], its profile [1.19e-16, 2.17e-16]) the Wald range is the curvature at the fit, symmetric in log K
     where the profile is not, and the union missed the truth."""
     corrected = c.corrected.fit
+    values = {"base": c.candidates[()].fit.permeability, "corrected": corrected.permeability}
     if unexplained:
-        return {
-            "base": c.candidates[()].fit.permeability,
-            "corrected": corrected.permeability,
-            "corrected_std": None,
-            "corrected_interval": [None, None],
-        }
-    low, high = _permeability_interval(corrected, c)
+        return {**values, "corrected_std": None, "corrected_interval": [None, None]}, []
+
+    def profiled(terms: tuple[str, ...]) -> tuple[float | None, float | None]:
+        found = known.get(terms)
+        return found if found is not None else _permeability_interval(c.candidates[terms].fit, c.samples, c.split.train)
+
+    low, high = profiled(c.corrected.terms)
     for other in alternatives:  # the base model too, when it is a rival
-        other_low, other_high = _permeability_interval(other.fit, c)
+        other_low, other_high = profiled(other)
         low = None if low is None or other_low is None else min(low, other_low)
         high = None if high is None or other_high is None else max(high, other_high)
+    further = _reaching(c.candidates, reach, (low, high), corrected.permeability, c.samples, c.split.train)
+    for other_low, other_high in further.values():
+        low = None if low is None or other_low is None else min(low, other_low)
+        high = None if high is None or other_high is None else max(high, other_high)
+    notes = [
+        _not_ruled_out_words(c.candidates, c.corrected.terms, larger, [_exp_or_none(side) for side in interval])
+        for larger, interval in (known | further).items()
+        if larger != c.corrected.terms
+    ]
     interval = within([_exp_or_none(low), _exp_or_none(high)], PLAUSIBLE_PERMEABILITY)
-    return {
-        "base": c.candidates[()].fit.permeability,
-        "corrected": corrected.permeability,
-        # The Wald std where it says what the data do (``_wald``), and not beside rivals' K either (real PAAm C: ±14%
-        # beside an interval of five decades).
-        "corrected_std": None if alternatives else _wald(corrected.permeability_std, interval, corrected),
-        "corrected_interval": interval,
-    }
+    # The Wald std where it says what the data do (``_wald``), and not beside other models' K either (real PAAm C:
+    # ±14% beside an interval of five decades).
+    std = None if alternatives or further else _wald(corrected.permeability_std, interval, corrected)
+    return {**values, "corrected_std": std, "corrected_interval": interval}, notes

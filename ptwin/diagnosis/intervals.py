@@ -13,7 +13,9 @@ outward. A side the data do not close within ``REACH`` steps of ×4 is None: the
 parameter is not bounded there. So is a side where the model stops being evaluable
 before the data close it (e.g. K so small that the Darcy force overflows): a failure of
 the model is no evidence against the parameter, and bisecting towards it would report the
-place where the arithmetic broke as a bound the data set. Each profile point's refit runs LM as the fits do
+place where the arithmetic broke as a bound the data set. Given points ``beyond`` (an interval found already), each
+side is searched only past its point: where the profile closes before it, the point is returned (one refit a side
+where that is all a caller needs to know). Each profile point's refit runs LM as the fits do
 (``physics_solver``): with LM's defaults it stopped short where K must move far from the last point (a pore
 relaxation doing nothing at its fit on a soft cantilever: M's lower end 6.29e3 Pa for 3.78e3 converged).
 """
@@ -35,11 +37,18 @@ REFIT = 40  # LM iterations of the other parameters at each profile point (as th
 
 
 def profile_interval(
-    fit: PhysicsFit, raw_name: str, raw_std: float, samples: Samples, index: torch.Tensor
+    fit: PhysicsFit,
+    raw_name: str,
+    raw_std: float,
+    samples: Samples,
+    index: torch.Tensor,
+    beyond: tuple[float | None, float | None] = (None, None),
 ) -> tuple[float | None, float | None]:
     """The 95% interval of the raw parameter ``raw_name`` (a name among the model's free parameters,
     e.g. 'fluid.log_permeability') on ``samples[index]``, in raw units; ``raw_std`` its Wald std (the
-    first step). None on a side the data do not close. Where ``fit`` holds the reference's contact
+    first step). None on a side the data do not close. ``beyond``: (low, high) raw points, each side searched past
+    its point only (None, or a point on the other side of the fit: the whole side; ±inf: a side open already, not
+    searched); a side closing before its point is returned as that point. Where ``fit`` holds the reference's contact
     correction, each profile point refits it too, within its range (``held_range``): held by choice, it is a
     nuisance like every other."""
     span = held_range(fit)
@@ -83,9 +92,10 @@ def profile_interval(
 
     step = raw_std if math.isfinite(raw_std) and raw_std > 0 else max(abs(theta[j].item()), 1.0) * 0.1
     sides = []
-    for sign in (-1.0, 1.0):
+    for sign, point in zip((-1.0, 1.0), beyond):
         warm["others"] = theta[others].clone()
-        end = _side(excess, sign * 1.96 * step)
+        past = None if point is None or sign * (point - theta[j].item()) <= 0 else point - theta[j].item()
+        end = _side(excess, sign * 1.96 * step, past)
         sides.append(None if end is None else theta[j].item() + end)
     return sides[0], sides[1]
 
@@ -97,10 +107,20 @@ def within(interval: list[float | None], plausible: tuple[float, float]) -> list
     return [None if side is None or not plausible[0] <= side <= plausible[1] else side for side in interval]
 
 
-def _side(excess, first: float) -> float | None:
-    """The offset where ``excess`` crosses zero, from 0 (where it is −√3.84) outward through ``first``."""
+def _side(excess, first: float, past: float | None = None) -> float | None:
+    """The offset where ``excess`` crosses zero, from 0 (where it is −√3.84) outward through ``first``; given an
+    offset ``past``, from there outward (×4), or ``past`` itself where ``excess`` is no longer negative there."""
     inside, g_inside = 0.0, -math.sqrt(LEVEL)
     outside = first
+    if past is not None:
+        if math.isinf(past):
+            return None
+        g_past = excess(past)
+        if math.isinf(g_past):
+            return None
+        if g_past >= 0:
+            return past
+        inside, g_inside, outside = past, g_past, past * 4.0
     for _ in range(REACH):
         g_outside = excess(outside)
         if math.isinf(g_outside):  # the model broke down first: no evidence of a bound
