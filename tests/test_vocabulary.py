@@ -154,10 +154,14 @@ def test_a_model_started_at_a_neighbours_optimum_costs_what_the_neighbour_does_t
     assert fit_from(p.make_model, (), larger, p.samples, p.split.train, 30, None).chi_square <= taken_out
 
 
-def test_a_term_grown_onto_a_fit_starts_where_it_acts_and_finds_the_pair(tmp_path, coarse_cache):
-    # A pore relaxation (M 2e5) beside a viscosity (γ 12): the pore alone runs off to M → ∞, and added to the
-    # viscosity's optimum where it does nothing (``fit_from``) it stays there, its gradient nil. Added at the
-    # cheapest of its starting values (``grown``, the diagnosis's forward step), one fit finds both sizes.
+def test_a_term_grown_onto_a_fit_finds_the_pair_from_where_it_does_nothing_and_from_where_it_acts(
+    tmp_path, coarse_cache
+):
+    # A pore relaxation (M 2e5) beside a viscosity (γ 12): the pore alone runs off to M → ∞. Added to the viscosity's
+    # optimum where it does nothing (``fit_from``), its gradient nearly nil, LM's first step had taken log M hundreds
+    # of e-folds out, where it stayed (M → ∞); with every parameter fitted in log moved at most two decades a step
+    # (``physics_solver``) it finds the pair, as it does added at the cheapest of its starting values (``grown``, the
+    # diagnosis's forward step).
     from ptwin.fitting.physics_fit import fit_from, fit_physics, fit_with_starts
     from ptwin.pipeline.prepare import prepare
     from tests.conftest import settings_for
@@ -168,9 +172,8 @@ def test_a_term_grown_onto_a_fit_starts_where_it_acts_and_finds_the_pair(tmp_pat
     base = fit_physics(p.make_model(), p.samples, p.split.train)
     viscosity = fit_with_starts(p.make_model, ("solid_viscosity",), p.samples, p.split.train, 60, base)
     pair = ("solid_viscosity", "pore_pressure_relaxation")
-    stuck = fit_from(p.make_model, pair, viscosity, p.samples, p.split.train, 60, None)
-    assert stuck.degenerate == {"pore_pressure_relaxation": "M → ∞"}
-    grown = fit_from(p.make_model, pair, viscosity, p.samples, p.split.train, 60, None, grown=True)
-    assert grown.chi_square < 0.3 * viscosity.chi_square and not grown.degenerate
-    assert grown.params["pore_pressure_relaxation"]["M"] == pytest.approx(2e5, rel=0.05)
-    assert grown.params["solid_viscosity"]["gamma"] == pytest.approx(12.0, rel=0.03)
+    for grown in (False, True):
+        fit = fit_from(p.make_model, pair, viscosity, p.samples, p.split.train, 60, None, grown=grown)
+        assert fit.chi_square < 0.3 * viscosity.chi_square and not fit.degenerate
+        assert fit.params["pore_pressure_relaxation"]["M"] == pytest.approx(2e5, rel=0.05)
+        assert fit.params["solid_viscosity"]["gamma"] == pytest.approx(12.0, rel=0.03)

@@ -97,9 +97,11 @@ class ParameterVector:
 
     def expand(self, per_name: dict[str, float], default: float = 1.0) -> torch.Tensor:
         """A per-entry vector from one value per parameter name (``default`` for the names not given)."""
-        return torch.cat(
-            [torch.full((s,), float(per_name.get(n, default))) for n, s in zip(self.names, self.sizes)]
-        ).to(torch.float64)
+        values = [
+            torch.full((s,), float(per_name.get(n, default)), dtype=torch.float64)
+            for n, s in zip(self.names, self.sizes)
+        ]
+        return torch.cat(values)
 
 
 def evaluated_at(module: nn.Module, values: dict[str, torch.Tensor], *args):

@@ -34,10 +34,13 @@ LAW_FALL = 0.5  # of the reference's largest force: more fall of the elastic law
 # start (K at 1e-9 m², F_D ∝ 1/K) the steps have gain ratio ≈ 1 and each moves log K by ln(1/cap) while the
 # damping falls by the cap: 16 e-folds took 25 accepted steps at 1/3 and take 14 (``tests/test_lm.py``).
 DAMPING_DECREASE = 0.1
-# The most one LM step moves log K: two decades. F_D ∝ 1/K is exponential in log K, and from the fluid-off start its
-# linearisation promised steps of ten e-folds and more that fell short; LM rejected three to seven of them while the
-# damping grew (``tests/test_lm.py``; on the bench map's spots those starts took 22 steps each, 9 of them rejected).
-LOG_PERMEABILITY_STEP = math.log(100.0)
+# The most one LM step moves log K, or any parameter fitted in log (log M, log tau): two decades. F_D ∝ 1/K is
+# exponential in log K, and from the fluid-off start its linearisation promised steps of ten e-folds and more that fell
+# short; LM rejected three to seven of them while the damping grew (``tests/test_lm.py``; on the bench map's spots
+# those starts took 22 steps each, 9 of them rejected). Where a term does nothing its gradient is nearly nil and the
+# step unbounded: a pore relaxation at M 4e6 Pa, refitted with K fixed, went from log M 19.9 to 449.8 in one step,
+# where its derivatives overflow.
+LOG_STEP = math.log(100.0)
 
 
 @dataclass
@@ -234,9 +237,10 @@ def physics_solver(
     vector: ParameterVector,
     entries: torch.Tensor | None = None,
 ) -> LevenbergMarquardt:
-    """LM as the physics fits run it (``DAMPING_DECREASE``; log K moved at most ``LOG_PERMEABILITY_STEP`` a step) on θ,
-    the ``entries`` of ``vector`` (None: all of them)."""
-    limit = vector.expand({PERMEABILITY: LOG_PERMEABILITY_STEP}, default=math.inf)
+    """LM as the physics fits run it (``DAMPING_DECREASE``; log K and every parameter fitted in log, ``log_…``, moved
+    at most ``LOG_STEP`` a step) on θ, the ``entries`` of ``vector`` (None: all of them)."""
+    logs = [name for name in vector.names if name.rpartition(".")[2].startswith("log_")]
+    limit = vector.expand(dict.fromkeys(logs, LOG_STEP), default=math.inf)
     limit = limit if entries is None else limit[entries]
     return LevenbergMarquardt(residual, theta, decrease=DAMPING_DECREASE, step_limit=limit)
 
