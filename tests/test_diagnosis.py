@@ -1183,7 +1183,7 @@ def test_the_larger_models_the_information_criterion_does_not_rule_out_are_those
     [
         ((2.0e-16, 2.5e-16), True),  # 21% below the fit's low end, K 2.37e-16: a difference a user acts on
         ((2.18e-16, 2.5e-16), False),  # 1.3% of K below it: immaterial, as rivals' K are (``MATERIAL``)
-        ((2.21e-16, 2.51e-16), False),  # the profile closed before the fit's ends: returned as them
+        ((2.21e-16, 2.51e-16), False),  # the profile closed before the fit's ends
         ((2.21e-16, None), True),  # open above
     ],
 )
@@ -1192,25 +1192,31 @@ def test_a_model_not_ruled_out_widens_k_s_interval_only_where_its_profile_reache
 ):
     # The realism suite's "pore, soft" at seed 3: nothing named, the pore fitted at M 1.2e5 Pa (doing nothing), K as
     # the base model's, [2.21e-16, 2.51e-16] m²; the pore's profile refits M, which acts where K is lower: [1.88e-16,
-    # ...], the truth 2e-16. Each side is searched only past the fit's own interval (``beyond``).
+    # ...], the truth 2e-16. Each side is searched only past the point 2% of K beyond the fit's own interval, and a
+    # side that closes before it is returned as that point (``profile_interval``).
     import math
 
     from ptwin.diagnosis import diagnose
 
     asked = []
 
-    def profile(fit, samples, index, beyond=None):
+    def profile(fit, samples, index, beyond):
         asked.append(beyond)
-        return tuple(None if side is None else math.log(side) for side in other)
+        sides = [None if side is None else math.log(side) for side in other]
+        low = beyond[0] if sides[0] is not None and sides[0] >= beyond[0] else sides[0]
+        high = beyond[1] if sides[1] is not None and sides[1] <= beyond[1] else sides[1]
+        return low, high
 
     monkeypatch.setattr(diagnose, "_permeability_interval", profile)
     candidates = {("a",): candidate(("a",), 1000.0, 1e-9)}
     interval = (math.log(2.21e-16), math.log(2.51e-16))
     found = diagnose._reaching(candidates, [("a",)], interval, 2.37e-16, None, None)
-    assert asked == [interval]
+    assert [tuple(map(math.exp, points)) for points in asked] == [
+        pytest.approx((2.21e-16 - 0.02 * 2.37e-16, 2.51e-16 + 0.02 * 2.37e-16), rel=1e-12, abs=0)
+    ]
     assert list(found) == [("a",)] * reaches
     open_above = diagnose._reaching(candidates, [("a",)], (interval[0], None), 2.37e-16, None, None)
-    assert asked[-1] == (interval[0], math.inf)
+    assert asked[-1][1] == math.inf
     assert bool(open_above) == (other[0] < 2.1e-16)
 
 

@@ -49,6 +49,7 @@ from ptwin.physics.terms import VOCABULARY
 FORMAT = "ptwin-diagnosis/2"
 CORRELATED = 0.95  # |correlation| with K worth a warning
 _LOG_FLOAT_MAX = math.log(1e300)  # a bound of log K beyond this is none (and its exp would overflow)
+_ROUNDING = 1e-9  # in log K: a profile side returned at the point it was searched past, to rounding
 
 
 @dataclass
@@ -869,24 +870,33 @@ def _reaching(
 ) -> dict[tuple[str, ...], tuple[float | None, float | None]]:
     """The ``subsets`` whose K's profile interval reaches past ``interval`` (log K, widened; None: open) by more than
     ``MATERIAL`` of K ``reference`` [m²] (a difference a user would act on), each with that interval's part past
-    it (each side searched only past ``interval``: one refit a side where it reaches no further)."""
+    it. Each side is searched only past the material point (``_material``): one refit a side where it reaches no
+    further. Searched from ``interval``'s own ends, a term whose profile is a little wider than the base model's on
+    a stiff null (immaterial) took three points a side, the screen a quarter of a map spot's diagnosis."""
+    points = _material(interval, reference)
     found = {}
     for terms in subsets:
-        low, high = interval
-        past = (-math.inf if low is None else low, math.inf if high is None else high)
-        other = _permeability_interval(candidates[terms].fit, samples, index, beyond=past)
-        if _further(interval, other, reference):
+        other = _permeability_interval(candidates[terms].fit, samples, index, beyond=points)
+        if _past(other, points):
             found[terms] = other
     return found
 
 
-def _further(interval: tuple, other: tuple, reference: float) -> bool:
-    """Whether ``other`` (log K; None: open) reaches past ``interval`` by more than ``MATERIAL`` of ``reference``."""
-    low, high = (_exp_or_none(side) for side in interval)
-    other_low, other_high = (_exp_or_none(side) for side in other)
-    lower = low is not None and (other_low is None or low - other_low > MATERIAL * reference)
-    higher = high is not None and (other_high is None or other_high - high > MATERIAL * reference)
-    return lower or higher
+def _material(interval: tuple, reference: float) -> tuple[float, float]:
+    """``interval`` (log K; None: open) moved out by ``MATERIAL`` of K ``reference`` [m²] on each closed side (±inf:
+    open, or a low end within that of zero)."""
+    low, high = interval
+    step = MATERIAL * reference
+    below = -math.inf if low is None or math.exp(low) <= step else math.log(math.exp(low) - step)
+    return below, math.inf if high is None else math.log(math.exp(high) + step)
+
+
+def _past(other: tuple, points: tuple[float, float]) -> bool:
+    """Whether ``other`` (log K; None: open) reaches past a finite one of ``points``; a side that closed before its
+    point is returned as it (``profile_interval``), to rounding."""
+    low, high = other
+    below = math.isfinite(points[0]) and (low is None or low < points[0] - _ROUNDING)
+    return below or (math.isfinite(points[1]) and (high is None or high > points[1] + _ROUNDING))
 
 
 def _physical(candidates: dict, terms: tuple[str, ...]) -> bool:
