@@ -1061,7 +1061,10 @@ def test_k_s_interval_is_widened_by_what_the_fluid_layer_may_be_off_the_exact_da
     import ptwin.diagnosis.diagnose as diagnose
 
     fit = SimpleNamespace(
-        permeability=1.99953e-16, permeability_std=1.8e-20, model=SimpleNamespace(fluid=SimpleNamespace(basis="b"))
+        permeability=1.99953e-16,
+        permeability_std=1.8e-20,
+        model=SimpleNamespace(fluid=SimpleNamespace(basis="b")),
+        degenerate={},
     )
     monkeypatch.setattr(diagnose, "profile_interval", lambda *_, **__: (math.log(1.99918e-16), math.log(1.99988e-16)))
     monkeypatch.setattr(diagnose, "closed_form_error", lambda basis: 2.0e-4)

@@ -82,6 +82,33 @@ def test_a_side_searched_past_a_point_ends_where_the_whole_profile_ends_or_at_th
     assert profile_interval(fit, "b", std, samples, index, beyond=(-math.inf, math.inf)) == (None, None)
 
 
+class Plateau(nn.Module):
+    """y = p + 3·exp(−e^q)·x: at large q the slope term does nothing and its gradient is nil (as a pore
+    relaxation's at M → ∞)."""
+
+    def __init__(self):
+        super().__init__()
+        self.p = nn.Parameter(torch.tensor(2.0, dtype=torch.float64))
+        self.q = nn.Parameter(torch.tensor(5.0, dtype=torch.float64))
+
+    def forward(self, samples):
+        return self.p + 3.0 * torch.exp(-torch.exp(self.q)) * samples.time
+
+
+def test_a_profile_point_refitted_from_the_starts_leaves_the_basin_where_a_term_does_nothing():
+    # Data with no slope: the fit leaves q at 5, where the slope term does nothing. With p fixed below its fit a
+    # slope would take part of the offset (the time's mean is 1/2), so p's lower end is further out than the
+    # plateau's; refitted warm from q = 5 the point never leaves the plateau (p's low end as without the term).
+    samples = line_samples()
+    samples.force[:] = 2.0 + 0.1 * torch.randn(len(samples), generator=torch.Generator().manual_seed(5))
+    fit, index = fitted_line(samples, Plateau())
+    assert fit.model.q.item() == pytest.approx(5.0, rel=1e-6)
+    warm = profile_interval(fit, "p", 0.01, samples, index)
+    restarted = profile_interval(fit, "p", 0.01, samples, index, starts=({"q": -2.0}, {"q": 0.0}))
+    assert restarted[0] < warm[0] - 0.5 * (fit.model.p.item() - warm[0])
+    assert restarted[1] == pytest.approx(warm[1], rel=0, abs=1e-3)
+
+
 class HeldContact(nn.Module):
     """A reference contact correction the fit holds (not a free parameter), within ``reach``."""
 
@@ -251,11 +278,14 @@ def test_a_term_doing_nothing_at_its_fit_is_a_rival_where_its_k_s_interval_reach
     # profile refits M, which acts where K is lower: the truth is inside.
     import math
 
-    from ptwin.diagnosis.diagnose import _past_the_base_model
+    from ptwin.diagnosis.diagnose import _past_the_base_model, _restarts
     from ptwin.diagnosis.name import Candidate
 
     samples, index, base, fit = soft_pore
     assert fit.degenerate and fit.permeability == pytest.approx(base.permeability, rel=0.02, abs=0)
+    # Doing nothing at M → ∞'s side, its gradient nil: K's profile refits from the pore's starts too (``_restarts``).
+    assert _restarts(fit) == tuple({f"terms.{PORE}.log_M": math.log(m)} for m in (1e3, 1e4, 1e5, 1e6))
+    assert _restarts(base) == ()
     candidates = {(): Candidate((), base, 0.0, 0.0), (PORE,): Candidate((PORE,), fit, 0.0, 0.0)}
     known = _past_the_base_model(candidates, [(PORE,)], samples, index)
     (low, high), (pore_low, _) = (tuple(map(math.exp, known[()])), tuple(map(math.exp, known[(PORE,)])))

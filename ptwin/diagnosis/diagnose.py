@@ -861,8 +861,27 @@ def _permeability_interval(
     raw_std = fit.permeability_std / fit.permeability
     error = closed_form_error(fit.model.fluid.basis)
     raw = (None, None) if beyond is None else (beyond[0] + math.log1p(error), beyond[1] + math.log1p(-error))
-    low, high = profile_interval(fit, PERMEABILITY, raw_std, samples, index, beyond=raw)
+    low, high = profile_interval(fit, PERMEABILITY, raw_std, samples, index, beyond=raw, starts=_restarts(fit))
     return (None if low is None else low - math.log1p(error), None if high is None else high - math.log1p(-error))
+
+
+def _restarts(fit: PhysicsFit) -> tuple[dict[str, float], ...]:
+    """Where a term of ``fit`` does nothing by running off towards an absence at infinity (a pore relaxation's
+    M → ∞, its gradient nil there), its starting values in raw units ({name: value}), for K's profile to refit
+    from too (``profile_interval``). A pore at M 1.2e5 Pa doing nothing on a soft cantilever: refitted warm, K's
+    profile under it reached 2.15e-16 m² or 1.88e-16 by the path its points took; M acts at 4e3 there."""
+    if not fit.degenerate:
+        return ()
+    found = []
+    for term, module in fit.model.terms.items():
+        if term not in fit.degenerate:
+            continue
+        for name, parameter in module.PARAMS.items():
+            if parameter.absent is not None and math.isinf(parameter.absent):
+                raw = f"terms.{term}.{module.raw_name(name)}"
+                to_raw = math.log if parameter.log else float
+                found += [{raw: to_raw(start[name])} for start in module.STARTS if name in start]
+    return tuple(found)
 
 
 def _reaching(

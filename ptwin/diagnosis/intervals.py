@@ -43,19 +43,23 @@ def profile_interval(
     samples: Samples,
     index: torch.Tensor,
     beyond: tuple[float | None, float | None] = (None, None),
+    starts: tuple[dict[str, float], ...] = (),
 ) -> tuple[float | None, float | None]:
     """The 95% interval of the raw parameter ``raw_name`` (a name among the model's free parameters,
     e.g. 'fluid.log_permeability') on ``samples[index]``, in raw units; ``raw_std`` its Wald std (the
     first step). None on a side the data do not close. ``beyond``: (low, high) raw points, each side searched past
     its point only (None, or a point on the other side of the fit: the whole side; ±inf: a side open already, not
-    searched); a side closing before its point is returned as that point. Where ``fit`` holds the reference's contact
-    correction, each profile point refits it too, within its range (``held_range``): held by choice, it is a
-    nuisance like every other."""
+    searched); a side closing before its point is returned as that point. ``starts``: raw values ({name: value})
+    each profile point is refitted from too, besides the last point's, the lowest χ² kept: where a term does nothing
+    at the fit its gradient is nil there, and a warm refit never leaves that basin. Where ``fit`` holds the
+    reference's contact correction, each profile point refits it too, within its range (``held_range``): held by
+    choice, it is a nuisance like every other."""
     span = held_range(fit)
     extra = ("contact.reference",) if span is not None else ()
     vector, residual = scaled_residual(fit.model, samples, index, also=extra)
     theta = vector.get()
     j = vector.entry(raw_name)
+    restarts = [{vector.entry(name): value for name, value in entries.items()} for entries in starts]
     contact = vector.entry("contact.reference") if extra else None
     others = [i for i in range(theta.numel()) if i != j]
     warm: dict[str, torch.Tensor] = {}  # the others at the last profile point, each side starting from θ̂
@@ -72,23 +76,33 @@ def profile_interval(
         rest = physics_solver(partial, fixed[at], vector, at).run(REFIT, settled=SETTLED) if free else fixed[at]
         return fixed.index_put((at,), rest)
 
+    def settled(start: torch.Tensor) -> tuple[torch.Tensor, float]:
+        """The others refitted from ``start``, and χ² there (``FitError`` where the model cannot be evaluated)."""
+        full = refitted(start, others)
+        if contact is not None and not span[0] <= full[contact].item() <= span[1]:  # held at an end, the rest refit
+            full[contact] = min(max(full[contact].item(), span[0]), span[1])
+            full = refitted(full, [i for i in others if i != contact])
+        with torch.no_grad():
+            return full, residual(full).square().sum().item()
+
     def excess(offset: float) -> float:
-        """√(Δχ²/κ²) − √3.84 with the parameter at θ̂ + offset, the others refitted (warm)."""
+        """√(Δχ²/κ²) − √3.84 with the parameter at θ̂ + offset, the others refitted (warm, and from each restart)."""
         start = theta.clone()
         start[others] = warm["others"]
         start[j] = theta[j] + offset
-        try:
-            full = refitted(start, others)
-            if contact is not None and not span[0] <= full[contact].item() <= span[1]:  # held at an end, the rest refit
-                full[contact] = min(max(full[contact].item(), span[0]), span[1])
-                full = refitted(full, [i for i in others if i != contact])
-            warm["others"] = full[others]
-            with torch.no_grad():
-                chi_square = residual(full).square().sum().item()
-        except FitError:
+        found = []
+        for attempt in [start, *(_moved(start, entries) for entries in restarts)]:
+            try:
+                found.append(settled(attempt))
+            except FitError:
+                continue
+        found = [(full, chi_square) for full, chi_square in found if math.isfinite(chi_square)]
+        if not found:
             return math.inf
+        full, chi_square = min(found, key=lambda pair: pair[1])
+        warm["others"] = full[others]
         delta = max(chi_square - fit.chi_square, 0.0) / scale
-        return math.sqrt(delta) - math.sqrt(LEVEL) if math.isfinite(delta) else math.inf
+        return math.sqrt(delta) - math.sqrt(LEVEL)
 
     step = raw_std if math.isfinite(raw_std) and raw_std > 0 else max(abs(theta[j].item()), 1.0) * 0.1
     sides = []
@@ -98,6 +112,14 @@ def profile_interval(
         end = _side(excess, sign * 1.96 * step, past)
         sides.append(None if end is None else theta[j].item() + end)
     return sides[0], sides[1]
+
+
+def _moved(theta: torch.Tensor, entries: dict[int, float]) -> torch.Tensor:
+    """θ with ``entries`` ({index: value}) set."""
+    moved = theta.clone()
+    for i, value in entries.items():
+        moved[i] = value
+    return moved
 
 
 def within(interval: list[float | None], plausible: tuple[float, float]) -> list[float | None]:
