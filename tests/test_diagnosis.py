@@ -1218,6 +1218,8 @@ def test_a_model_not_ruled_out_widens_k_s_interval_only_where_its_profile_reache
         pytest.approx((2.21e-16 - 0.02 * 2.37e-16, 2.51e-16 + 0.02 * 2.37e-16), rel=1e-12, abs=0)
     ]
     assert list(found) == [("a",)] * reaches
+    if reaches and other[1] is not None:  # a side that does not reach is the interval's own (searched only so far)
+        assert found[("a",)][1] == interval[1]
     open_above = diagnose._reaching(candidates, [("a",)], (interval[0], None), 2.37e-16, None, None)
     assert asked[-1][1] == math.inf
     assert bool(open_above) == (other[0] < 2.1e-16)

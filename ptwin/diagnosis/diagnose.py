@@ -580,7 +580,7 @@ def _past_the_base_model(
     another K at its fit is (``_rivals``): it explains the data as well, and it would have them say another K. A
     pore relaxation concealed on a soft cantilever (M 5e3 Pa) was fitted at M 1.2e5, below the noise, K as the
     base model's, and counted as no rival; its profile refits M, which acts where K is lower: K's interval under
-    the pore [1.89e-16, 2.51e-16] m², under the base model [2.21e-16, 2.51e-16], the truth 2e-16."""
+    the pore reaches 1.87e-16 m², under the base model [2.21e-16, 2.51e-16], the truth 2e-16."""
     base = candidates[()].fit
     known = {(): _permeability_interval(base, samples, index)}
     return known | _reaching(candidates, singles, known[()], base.permeability, samples, index)
@@ -595,7 +595,7 @@ def _not_ruled_out(candidates: dict, chosen: tuple[str, ...], bic_margin: float)
     was 3.43e-16 m² in [3.39e-16, 3.46e-16], the pair's 3.01e-16, the truth 3e-16. A term doing nothing at its fit
     counts too: its K's profile refits its strength, which may act where K moves (a pore relaxation concealed on a
     soft cantilever, nothing named: M 1.2e5 Pa, below the noise, 4.9 BIC above the base model; base K's interval
-    [2.21e-16, 2.51e-16], the pore's [1.87e-16, 2.51e-16], the truth 2e-16)."""
+    [2.21e-16, 2.51e-16], the pore's reaching 1.87e-16, the truth 2e-16)."""
     fit = candidates[chosen].fit
     return [
         t
@@ -610,7 +610,7 @@ def _not_ruled_out(candidates: dict, chosen: tuple[str, ...], bic_margin: float)
 
 
 def _not_ruled_out_words(candidates: dict, chosen: tuple[str, ...], larger: tuple[str, ...], interval) -> str:
-    """Why K's interval reaches ``interval`` [m²] (low, high; None: open), K's under ``larger``."""
+    """Why K's interval reaches ``interval`` [m²] (low, high; None: open) under ``larger``."""
     (extra,) = set(larger) - set(chosen)
     fit, other = candidates[chosen].fit, candidates[larger].fit
     low, high = (f"{side:.3g}" if side is not None else "open" for side in interval)
@@ -620,7 +620,7 @@ def _not_ruled_out_words(candidates: dict, chosen: tuple[str, ...], larger: tupl
         else f"{other.bic - fit.bic:.1f} BIC above {' + '.join(chosen) or 'the base model'}, within the margin"
     )
     return (
-        f"K's interval covers K's 95% interval under {' + '.join(larger)} ({low} to {high} m², at its fit "
+        f"K's interval reaches {low} to {high} m² with {' + '.join(larger)} (at its fit "
         f"{other.permeability:.3g} against {fit.permeability:.3g}): {weighed}, though {extra} is not proven"
         + f" beside {' + '.join(chosen)}" * bool(chosen)
         + ", so the data do not rule it out"
@@ -888,16 +888,19 @@ def _reaching(
     candidates: dict, subsets: list[tuple[str, ...]], interval: tuple, reference: float, samples: Samples, index
 ) -> dict[tuple[str, ...], tuple[float | None, float | None]]:
     """The ``subsets`` whose K's profile interval reaches past ``interval`` (log K, widened; None: open) by more than
-    ``MATERIAL`` of K ``reference`` [m²] (a difference a user would act on), each with that interval's part past
-    it. Each side is searched only past the material point (``_material``): one refit a side where it reaches no
-    further. Searched from ``interval``'s own ends, a term whose profile is a little wider than the base model's on
-    a stiff null (immaterial) took three points a side, the screen a quarter of a map spot's diagnosis."""
+    ``MATERIAL`` of K ``reference`` [m²] (a difference a user would act on), each with ``interval`` widened to
+    where it reaches: a side that does not reach is ``interval``'s own (searched only to the material point, it
+    says nothing short of it). Each side is searched only past the material point (``_material``): one refit a
+    side where it reaches no further. Searched from ``interval``'s own ends, a term whose profile is a little wider
+    than the base model's on a stiff null (immaterial) took three points a side, the screen a quarter of a map
+    spot's diagnosis."""
     points = _material(interval, reference)
     found = {}
     for terms in subsets:
         other = _permeability_interval(candidates[terms].fit, samples, index, beyond=points)
-        if _past(other, points):
-            found[terms] = other
+        lower, higher = _past(other, points)
+        if lower or higher:
+            found[terms] = (other[0] if lower else interval[0], other[1] if higher else interval[1])
     return found
 
 
@@ -910,12 +913,12 @@ def _material(interval: tuple, reference: float) -> tuple[float, float]:
     return below, math.inf if high is None else math.log(math.exp(high) + step)
 
 
-def _past(other: tuple, points: tuple[float, float]) -> bool:
-    """Whether ``other`` (log K; None: open) reaches past a finite one of ``points``; a side that closed before its
-    point is returned as it (``profile_interval``), to rounding."""
+def _past(other: tuple, points: tuple[float, float]) -> tuple[bool, bool]:
+    """Whether ``other`` (log K; None: open) reaches past each finite one of ``points`` (low, high); a side that closed
+    before its point is returned as it (``profile_interval``), to rounding."""
     low, high = other
     below = math.isfinite(points[0]) and (low is None or low < points[0] - _ROUNDING)
-    return below or (math.isfinite(points[1]) and (high is None or high > points[1] + _ROUNDING))
+    return below, math.isfinite(points[1]) and (high is None or high > points[1] + _ROUNDING)
 
 
 def _physical(candidates: dict, terms: tuple[str, ...]) -> bool:
