@@ -879,8 +879,7 @@ def _restarts(fit: PhysicsFit) -> tuple[dict[str, float], ...]:
         for name, parameter in module.PARAMS.items():
             if parameter.absent is not None and math.isinf(parameter.absent):
                 raw = f"terms.{term}.{module.raw_name(name)}"
-                to_raw = math.log if parameter.log else float
-                found += [{raw: to_raw(start[name])} for start in module.STARTS if name in start]
+                found += [{raw: parameter.raw(start[name])} for start in module.STARTS if name in start]
     return tuple(found)
 
 
@@ -919,6 +918,12 @@ def _past(other: tuple, points: tuple[float, float]) -> tuple[bool, bool]:
     low, high = other
     below = math.isfinite(points[0]) and (low is None or low < points[0] - _ROUNDING)
     return below, math.isfinite(points[1]) and (high is None or high > points[1] + _ROUNDING)
+
+
+def _union(one: tuple, other: tuple) -> tuple[float | None, float | None]:
+    """The smallest interval (log K; None: open) holding both."""
+    low = None if one[0] is None or other[0] is None else min(one[0], other[0])
+    return low, None if one[1] is None or other[1] is None else max(one[1], other[1])
 
 
 def _physical(candidates: dict, terms: tuple[str, ...]) -> bool:
@@ -1008,13 +1013,10 @@ def _permeability(
 
     low, high = profiled(c.corrected.terms)
     for other in alternatives:  # the base model too, when it is a rival
-        other_low, other_high = profiled(other)
-        low = None if low is None or other_low is None else min(low, other_low)
-        high = None if high is None or other_high is None else max(high, other_high)
+        low, high = _union((low, high), profiled(other))
     further = _reaching(c.candidates, reach, (low, high), corrected.permeability, c.samples, c.split.train)
-    for other_low, other_high in further.values():
-        low = None if low is None or other_low is None else min(low, other_low)
-        high = None if high is None or other_high is None else max(high, other_high)
+    for other in further.values():
+        low, high = _union((low, high), other)
     notes = [
         _not_ruled_out_words(c.candidates, c.corrected.terms, larger, [_exp_or_none(side) for side in interval])
         for larger, interval in (known | further).items()

@@ -61,6 +61,10 @@ class Parameter:
             return f"{name} → 0"
         return None
 
+    def raw(self, value: float) -> float:
+        """``value`` as it is fitted: its log where the parameter is fitted in log."""
+        return math.log(value) if self.log else value
+
     def allows_absence(self, interval: list[float | None]) -> bool:
         """Whether a 95% interval [low, high] (None: open on that side) reaches the value where the term does
         nothing: the data do not exclude that the term is absent."""
@@ -107,8 +111,7 @@ class Term(nn.Module):
         super().__init__()
         self.probe_radius = probe_radius
         for name, parameter in self.PARAMS.items():
-            value = float(values.get(name, parameter.default))
-            raw = math.log(value) if parameter.log else value
+            raw = parameter.raw(float(values.get(name, parameter.default)))
             self.register_parameter(self.raw_name(name), nn.Parameter(torch.tensor(raw, dtype=torch.float64)))
 
     @classmethod
