@@ -1,14 +1,19 @@
 """The self-consistent elastic law read off the reference curve, against the Hertz truth."""
 
+import numpy as np
 import pytest
 import torch
 
 import ptwin
 from ptwin.data.kinematics import curve_kinematics
 from ptwin.data.recordings import load_recordings, write_recordings
-from ptwin.physics.elastic import ReferenceCurve, hertz_force
+from ptwin.fitting.physics_fit import fit_with_starts
+from ptwin.physics.elastic import ReferenceCurve, hertz_force, hertz_stiffness
 from ptwin.physics.model import ForceModel
+from ptwin.pipeline.prepare import prepare
+from ptwin.synth.presets import SOFT_CANTILEVER
 from ptwin.synth.simulator import Experiment, simulate
+from tests.conftest import settings_for
 
 
 @pytest.fixture(scope="module")
@@ -96,3 +101,35 @@ def test_before_contact_the_law_is_zero_whatever_its_first_node_holds(reference)
     torch.testing.assert_close(law.interpolate(nodes, depth), expected, rtol=1e-12, atol=0)
     columns = torch.stack([nodes, 2 * nodes], dim=1)
     torch.testing.assert_close(law.interpolate(columns, depth), torch.stack([expected, 2 * expected], dim=1))
+
+
+def test_the_laws_stiffness_is_the_spheres_and_gains_the_force_noise_by_it(reference):
+    # The local lines the law is smoothed with give its slope: on the 2 µm/s reference of a Hertz solid, 2·E*·√(ρw)
+    # within the reference's own Darcy force (it stiffens the curve by a few % in depth); beyond the deepest node
+    # the continued sphere's; none before contact.
+    e, curve = reference
+    law = ReferenceCurve(curve)
+    depth = np.linspace(0.2, 1.2, 30) * law.deepest
+    hertz = hertz_stiffness(depth, e.effective_modulus, e.probe_radius)
+    assert law.stiffness(depth) == pytest.approx(hertz, rel=0.05, abs=0)
+    assert law.stiffness(np.array([-1e-7, 0.0])).tolist() == [0.0, 0.0]
+    gain = law.noise_gain(depth, e.spring_constant)
+    assert gain == pytest.approx(1.0 + law.stiffness(depth) / e.spring_constant, rel=1e-12, abs=0)
+
+
+def test_a_samples_residual_noise_is_its_force_noise_gained_by_the_laws_stiffness(tmp_path, coarse_cache):
+    # w = z − F/k_s is read off the measured force, so on a soft cantilever the force noise moves the depth the law
+    # is read at, and the residual of a fit carries n·(1 + s/k_s). White noise, known contacts: the base model's
+    # χ² per sample in contact is 1 in units of each sample's noise std (σ × the gain), 1.2 in the curves' σ.
+    setting = {**SOFT_CANTILEVER, "contact_point": "known", "contact_error": 0.0, "baseline_offset": 0.0, "tilt": 0.0}
+    setting.update(noise_correlation=0.0, z_end=1.5e-6, samples=2000)
+    write_recordings(tmp_path, *simulate(Experiment(**setting)))
+    prepared = prepare(settings_for(f"data.path={tmp_path}", "pgd=coarse", f"cache_dir={coarse_cache}"), print)
+    samples, train = prepared.samples, prepared.split.train
+    fit = fit_with_starts(prepared.make_model, (), samples, train)
+    with torch.no_grad():
+        scaled = ((samples.force - fit.model(samples)) / samples.noise_floor)[train]
+    gain = samples.noise_gain[train]
+    assert gain.max() > 1.25
+    assert scaled.square().mean().item() == pytest.approx(1.0, abs=0.05)
+    assert (scaled * gain).square().mean().item() > 1.15

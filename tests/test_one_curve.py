@@ -59,7 +59,7 @@ def test_noise_measured_on_the_residual_keeps_the_samples_as_fitted(tmp_path, co
     assert rests_on_short_records(prepared.noise)
     twin = prepared.make_model.twin(truth.permeability, 1e-9, prepared.samples, prepared.split.train)
     noise = _residual_noise(prepared, twin.predict, settings.diagnosis.block, 1, RESIDUAL)
-    rebuilt, _ = fitted_samples(prepared.fitted, noise, "cpu", prepared.reference)
+    rebuilt, _ = fitted_samples(prepared.fitted, noise, "cpu", prepared.reference, prepared.noise_gain)
     assert rebuilt.noise_inflation != prepared.samples.noise_inflation
     assert torch.equal(rebuilt.in_contact, prepared.samples.in_contact)
     assert torch.equal(rebuilt.pins_contact, prepared.samples.pins_contact)

@@ -31,7 +31,7 @@ class Mismatch:
     depth_from: float  # [m] first and last depth of the blocks off the noise floor
     depth_to: float
     rms_residual: float  # [N] over that range
-    noise_floor: float  # [N]
+    noise_floor: float  # [N], the RMS of the residual noise std over that range
     whiteness: float  # W of the curve's whole residual
 
 
@@ -87,8 +87,7 @@ def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block:
         if off.numel() == 0:
             continue
         lo, hi = edges[off.min()].item(), edges[off.max() + 1].item()
-        depth = samples.depth[where[lo:hi]]
-        noise = samples.noise_floor[where[0]].item()
+        depth, noise = samples.depth[where[lo:hi]], samples.noise_floor[where[lo:hi]]
         found.append(
             Mismatch(
                 curve=curve,
@@ -96,7 +95,7 @@ def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block:
                 depth_from=depth.min().item(),
                 depth_to=depth.max().item(),
                 rms_residual=(scaled[lo:hi] * noise).square().mean().sqrt().item(),
-                noise_floor=noise,
+                noise_floor=noise.square().mean().sqrt().item(),
                 whiteness=w,
             )
         )

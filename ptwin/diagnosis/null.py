@@ -122,7 +122,9 @@ def structure_test(
     if reference is not None:
         nodes = reference.smooth(_draw(rng, reference.samples, noise)) * reference.noise_std  # (nodes, R)
         nodes = torch.from_numpy(nodes).to(reference.depth_nodes.device)
-        inherited = reference.interpolate(nodes, samples.depth[index].detach()).cpu().numpy()  # (samples, R) [N]
+        inherited = reference.interpolate(nodes, samples.depth[index].detach())  # (samples, R) [N]
+        # The law's noise, read off the reference's force and depth, is gained in the residual as a sample's own is.
+        inherited = (inherited * samples.noise_gain[index, None]).cpu().numpy()
     sigma = samples.noise_floor[index].detach().cpu().numpy()[:, None]
     residual = (sigma * _draw(rng, index.numel(), noise) - inherited) / sigma
     curve = samples.curve[index].detach().cpu().numpy()

@@ -7,6 +7,7 @@ runs over whole curves (the history matters) and fits choose samples by index.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -27,7 +28,7 @@ class Samples:
     start: torch.Tensor  # bool: first sample of a curve
     curve: torch.Tensor  # long: index into ``curve_ids``
     in_contact: torch.Tensor  # bool: samples in contact (w > 0, not on a retract)
-    noise_floor: torch.Tensor  # [N], the curve's noise std σ
+    noise_floor: torch.Tensor  # [N], the std of the sample's residual noise: its curve's σ × ``noise_gain``
     curve_ids: tuple[str, ...]
     noise_inflation: float = 1.0  # κ² of the set's noise: block-mean variance over the white expectation
     segment: torch.Tensor | None = None  # long: 0 approach, 1 hold, 2 retract (None: all approach)
@@ -39,6 +40,7 @@ class Samples:
     line_sums: torch.Tensor | None = None  # (S, 3): (n, Σt, Σt²) of the line's samples (zeros: no line)
     own_level: torch.Tensor | None = None  # bool: the curve's own level was removed (not the set's common one)
     reference_line: tuple[float, float, float] | None = None  # the reference curve's line sums (the law's error)
+    noise_gain: torch.Tensor | None = None  # 1 + s/k_s: the force noise's gain in the residual (None: 1)
 
     def __post_init__(self):
         if self.segment is None:
@@ -55,6 +57,8 @@ class Samples:
             self.line_sums = torch.zeros(self.time.numel(), 3, dtype=self.time.dtype, device=self.time.device)
         if self.own_level is None:
             self.own_level = torch.zeros_like(self.in_contact)
+        if self.noise_gain is None:
+            self.noise_gain = torch.ones_like(self.time)
 
     @property
     def fitted(self) -> torch.Tensor:
@@ -63,18 +67,24 @@ class Samples:
 
     @classmethod
     def from_curves(
-        cls, curves: list[CurveKinematics], noise_inflation: float = 1.0, reference: CurveKinematics | None = None
+        cls,
+        curves: list[CurveKinematics],
+        noise_inflation: float = 1.0,
+        reference: CurveKinematics | None = None,
+        noise_gain: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> Samples:
         """The curves' samples; ``noise_inflation``: the set's κ². A curve whose own baseline measured a
         larger κ² (real noise drifts more on some curves than on others) keeps its own for the whiteness
         test: the set's would read its correlated noise as structure. ``reference``: the reference curve, whose
         removed line the elastic law carries into every curve; its own samples carry none (the law read off its
-        approach has the same error as its hold)."""
+        approach has the same error as its hold). ``noise_gain``: depth [m] → the force noise's gain in the residual
+        there (``ReferenceCurve.noise_gain``; None: 1)."""
 
         def cat(values):
             return torch.from_numpy(np.concatenate(values))
 
         starts = [np.arange(len(c.time)) == 0 for c in curves]
+        gains = [np.ones_like(c.depth) if noise_gain is None else noise_gain(c.depth) for c in curves]
         return cls(
             time=cat([c.time for c in curves]),
             depth=cat([c.depth for c in curves]),
@@ -84,7 +94,7 @@ class Samples:
             start=cat(starts),
             curve=cat([np.full(len(c.time), i) for i, c in enumerate(curves)]),
             in_contact=cat([c.in_contact for c in curves]),
-            noise_floor=cat([np.full(len(c.time), c.noise_floor) for c in curves]),
+            noise_floor=cat([c.noise_floor * gain for c, gain in zip(curves, gains)]),
             curve_ids=tuple(c.curve for c in curves),
             noise_inflation=noise_inflation,
             segment=cat([c.segment for c in curves]),
@@ -95,6 +105,7 @@ class Samples:
             line_sums=cat([np.tile(_line_sums(c, reference) or (0.0,) * 3, (len(c.time), 1)) for c in curves]),
             own_level=cat([np.full(len(c.time), c.baseline is not None and not c.baseline.common) for c in curves]),
             reference_line=None if reference is None else _line_sums(reference, None),
+            noise_gain=cat(gains),
         )
 
     def join(self, other: Samples) -> Samples:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 import torch
@@ -107,6 +107,11 @@ class Prepared:
         return self.noise.std
 
     @property
+    def noise_gain(self) -> Callable[[np.ndarray], np.ndarray]:
+        """Depth [m] → the force noise's gain in a sample's residual there (``ReferenceCurve.noise_gain``)."""
+        return partial(self.make_model.reference.noise_gain, spring_constant=self.recordings.meta.spring_constant)
+
+    @property
     def reference(self) -> CurveKinematics:
         """The reference curve, whose approach is the elastic law."""
         return next(c for c in self.curves if c.curve == self.recordings.meta.reference_curve)
@@ -140,7 +145,8 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     law = ReferenceCurve(reference, settings.model.elastic_nodes, settings.model.elastic_smoothing)
     fitted, notes = _fitted_curves(recordings, curves, reference, law)
     notes += [_unsettled_note(c) for c in curves if c.noise.unsettled]
-    samples, noise = fitted_samples(fitted, noise, settings.device, reference)
+    gain = partial(law.noise_gain, spring_constant=meta.spring_constant)
+    samples, noise = fitted_samples(fitted, noise, settings.device, reference, gain)
     basis = cached_basis(settings.pgd, settings.cache_dir, progress)
     s = settings.split
     try:
@@ -259,12 +265,17 @@ def _spot_note(curves) -> str | None:
 
 
 def fitted_samples(
-    fitted: list[CurveKinematics], noise: NoiseModel, device: str, reference: CurveKinematics
+    fitted: list[CurveKinematics],
+    noise: NoiseModel,
+    device: str,
+    reference: CurveKinematics,
+    gain: Callable[[np.ndarray], np.ndarray],
 ) -> tuple[Samples, NoiseModel]:
     """The ``fitted`` curves' samples under the set's ``noise`` (its κ²), and that noise with σ the curves' mean
-    over their fitted samples; ``reference``: the reference curve, whose baseline the law carries."""
+    over their fitted samples; ``reference``: the reference curve, whose baseline the law carries; ``gain``: depth
+    → the force noise's gain in the residual (``Prepared.noise_gain``)."""
     noise = replace(noise, std=float(np.average([c.noise.std for c in fitted], weights=_counts(fitted))))
-    return Samples.from_curves(fitted, noise.inflation, reference).to(device), noise
+    return Samples.from_curves(fitted, noise.inflation, reference, gain).to(device), noise
 
 
 def _counts(curves) -> list[int]:

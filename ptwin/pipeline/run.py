@@ -280,7 +280,8 @@ def _capped_by_residuals(prepared: Prepared, first: FirstFits, block: int) -> Pr
 
 
 def _rebuilt(prepared: Prepared, fitted: list[CurveKinematics], noise: NoiseModel) -> Prepared:
-    samples, noise = fitted_samples(fitted, noise, prepared.samples.time.device, prepared.reference)
+    device = prepared.samples.time.device
+    samples, noise = fitted_samples(fitted, noise, device, prepared.reference, prepared.noise_gain)
     return replace(prepared, samples=samples, noise=noise, fitted=fitted)
 
 
