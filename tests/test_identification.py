@@ -281,6 +281,16 @@ def test_a_simulated_next_curve_never_takes_a_recorded_curves_contact_correction
     assert (shift[: len(samples)] == 5e-8).all() and not shift[len(samples) :].any()
 
 
+def test_a_simulated_next_curves_noise_is_gained_by_the_laws_stiffness_as_a_recorded_ones(estimated):
+    # The design reads a proposed curve's χ² under the noise model: a sample's noise std there is σ·(1 + s/k_s) at
+    # its depth, as on the recorded curves (``ReferenceCurve.noise_gain``); σ alone overstated every separation.
+    settings, p = estimated
+    pseudo, _ = _design(p, settings)._pseudo_samples(simulate_curve(Experiment(samples=200), 8e-6, balance=False))
+    gain = torch.from_numpy(p.noise_gain(pseudo.depth.numpy()))
+    assert gain.max() > 1.05 and gain.min() == 1.0  # in contact, and before it
+    torch.testing.assert_close(pseudo.noise_floor, p.noise.std * gain, rtol=1e-12, atol=0)
+
+
 SHARED_VISCOUS = Path(__file__).resolve().parents[2] / "shared" / "bench-sets" / "p05_visc_soft_real_noise" / "data"
 
 

@@ -119,6 +119,7 @@ class ExperimentDesign:
     index: torch.Tensor
     smoothing: float = 0.05
     heldout_margin: float = 0.10  # the grade's held-out margin (``DiagnosisSettings``)
+    noise_gain: Callable[[np.ndarray], np.ndarray] | None = None  # depth → the noise's gain in a residual (None: 1)
     _simulated: dict = field(default_factory=dict, repr=False)  # (candidate, protocol) → CurveSimulation or its error
     _refitted: dict = field(default_factory=dict, repr=False)  # (candidate, truth, protocol) → χ² refitted
 
@@ -318,7 +319,8 @@ class ExperimentDesign:
 
     def _pseudo_samples(self, curve: CurveSimulation) -> tuple[Samples, int]:
         """The simulated curve as samples of a curve 'next' (primed if a recorded curve has that name; every
-        k-th sample, at most ``MAX_SAMPLES``), with the set's noise std (a noise-free curve measures none), and k."""
+        k-th sample, at most ``MAX_SAMPLES``), with the set's noise std (a noise-free curve measures none) gained by
+        ``noise_gain``, and k."""
         name = "next"
         while name in self.samples.curve_ids:  # fitted contact corrections are looked up by curve id
             name += "'"
@@ -337,7 +339,8 @@ class ExperimentDesign:
         stride = max(1, curve.time.size // MAX_SAMPLES)
         arrays = {name: value[::stride] for name, value in vars(kinematics).items() if isinstance(value, np.ndarray)}
         kinematics = replace(kinematics, **arrays, noise=self.noise)
-        return Samples.from_curves([kinematics], self.samples.noise_inflation).to(self.samples.time.device), stride
+        samples = Samples.from_curves([kinematics], self.samples.noise_inflation, noise_gain=self.noise_gain)
+        return samples.to(self.samples.time.device), stride
 
 
 def curves_needed(separation: float, excess: float, recorded: float, samples: int, heldout_margin: float) -> float:

@@ -341,6 +341,7 @@ def _design(prepared: Prepared, settings: Settings) -> ExperimentDesign:
         index=prepared.split.train,
         smoothing=settings.data.smoothing,
         heldout_margin=settings.diagnosis.heldout_margin,
+        noise_gain=prepared.noise_gain,
     )
 
 
