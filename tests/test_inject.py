@@ -14,6 +14,7 @@ from hydra import compose, initialize_config_dir
 
 from ptwin.app import register, typed
 from ptwin.data.recordings import load_recordings
+from ptwin.physics.elastic import hertz_stiffness
 from ptwin.pipeline.inject import (
     BASE_PERMEABILITY,
     Own,
@@ -25,6 +26,7 @@ from ptwin.pipeline.inject import (
     judged_peak,
 )
 from ptwin.pipeline.prepare import prepare
+from ptwin.synth.simulator import Experiment
 from tests.conftest import CONFIGS, OPEN_DATA, needs_open_data, simulated_set
 
 QUICK = ("optim.hybrid.regularisations=[1.0e-2]", "optim.hybrid.iterations=10")
@@ -49,11 +51,12 @@ def test_a_viscous_force_added_reaches_the_recording_through_the_cantilever_bala
     assert np.all(shown[fast.depth <= 0] == 0.0)  # no contact radius, no viscous force
     tip = np.pi * 5.0 * fast.contact_radius[contact] * fast.velocity[contact]
     ratio = shown[contact] / tip
-    k = prepared.recordings.meta.spring_constant
-    assert np.all((ratio > 0) & (ratio <= 1.0 + 1e-9))
-    stiffness = k * (1 / ratio - 1)  # s = dF/dw of the sphere: grows like √w, so the share falls with depth
-    deep = fast.depth[contact] > 0.5 * fast.depth.max()
-    assert np.median(stiffness[deep]) > np.median(stiffness[~deep])
+    # s = dF/dw of the set's sphere, 2E*√(ρw), read off the law (the slow reference's own Darcy force adds ~1%).
+    experiment = Experiment()
+    sphere = hertz_stiffness(fast.depth[contact], experiment.effective_modulus, experiment.probe_radius)
+    share = 1.0 / (1.0 + sphere / prepared.recordings.meta.spring_constant)
+    assert share.min() < 0.95  # the sample takes a share that matters here ...
+    assert ratio == pytest.approx(share, rel=0.01, abs=0)  # ... and the recording shows the rest
 
 
 def test_a_term_added_starts_where_the_elastic_force_does_whatever_the_reference_correction(tmp_path, coarse_cache):

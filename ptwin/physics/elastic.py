@@ -103,7 +103,8 @@ class ReferenceCurve(nn.Module):
         force noise becomes in its residual. The depth w = z − F/k_s is read off the measured force, so noise n in
         the force moves the depth by −n/k_s and the law by −s·n/k_s, and the residual carries n·(1 + s/k_s): on
         the realism suite's soft cantilever up to 1.2 at the deepest samples, the residuals' χ² in contact 1.3× the
-        noise's on average without it."""
+        noise's on average without it. A force added at the tip reaches the recording divided by it
+        (``ptwin.pipeline.inject``)."""
         return 1.0 + self.stiffness(depth) / spring_constant
 
     def smooth(self, values: np.ndarray) -> np.ndarray:

@@ -10,7 +10,8 @@ force (bench-set p03: 62 nm before the onset, so a viscosity pushed on samples b
 the diagnosis could fit only half of it). A
 force added at the tip does not reach the recording whole: cantilever and sample share it. At first
 order in ΔF, the balance k_c·(z − w) = F(w, …) with z as recorded gives δF = ΔF·k_c/(k_c + s), s =
-dF_el/dw the sample's contact stiffness (0 before contact: all of ΔF is deflection there). δF is added
+dF/dw the sample's contact stiffness (0 before contact: all of ΔF is deflection there): ΔF over the gain
+1 + s/k_c that the force noise takes into a residual (``ReferenceCurve.noise_gain``). δF is added
 to the recorded force; z, time and the noise stay as recorded, and the depth follows (w = z − F/k_c).
 
 Limits. First order: where δF changes the depth enough to change ΔF or s (δF/k_c not small against
@@ -205,15 +206,11 @@ def added_force(
     with_term = prepared.make_model((term,), {term: params}, fit.permeability)
     with_term.contact = base.contact  # the base fit's contact corrections
     samples = Samples.from_curves(prepared.curves).to(prepared.samples.time.device)
-    step = (base.reference.depth_nodes[1] - base.reference.depth_nodes[0]).item()
     with torch.no_grad():
         depth = base.depth(samples)
         elastic = base.elastic(depth)
         delta = total(with_term.rate_forces(samples, elastic)) - total(base.rate_forces(samples, elastic))
-        slope = (base.elastic(depth + step) - base.elastic(depth - step)) / (2 * step)
-        stiffness = torch.where(depth > 0, slope.clamp(min=0.0), torch.zeros_like(slope))
-    spring = prepared.recordings.meta.spring_constant
-    measured = (delta * spring / (spring + stiffness)).cpu().numpy()
+    measured = delta.cpu().numpy() / prepared.noise_gain(depth.cpu().numpy())
     curve = samples.curve.cpu().numpy()
     return {curve_id: measured[curve == i] for i, curve_id in enumerate(samples.curve_ids)}
 
