@@ -878,7 +878,7 @@ def _restarts(fit: PhysicsFit) -> tuple[dict[str, float], ...]:
             continue
         for name, parameter in module.PARAMS.items():
             if parameter.absent is not None and math.isinf(parameter.absent):
-                raw = f"terms.{term}.{module.raw_name(name)}"
+                raw = fit.model.fitted_name(term, name)
                 found += [{raw: parameter.raw(start[name])} for start in module.STARTS if name in start]
     return tuple(found)
 
@@ -955,7 +955,7 @@ def parameter_interval(
     parameter = module.PARAMS[name]
     value, std = fit.params[term][name], fit.param_std[term][name]
     raw_std = std / abs(value) if parameter.log and value else std
-    low, high = profile_interval(fit, f"terms.{term}.{module.raw_name(name)}", raw_std, samples, index)
+    low, high = profile_interval(fit, fit.model.fitted_name(term, name), raw_std, samples, index)
     to_value = _exp_or_none if parameter.log else _float_or_none
     low, high = to_value(low), to_value(high)
     if low is not None and parameter.minimum is not None:

@@ -181,7 +181,7 @@ def fit_physics(
 
     for name, term in model.terms.items():
         params[name] = term.values()
-        raw = {p: f"terms.{name}.{term.raw_name(p)}" for p in term.PARAMS}
+        raw = {p: model.fitted_name(name, p) for p in term.PARAMS}
         param_std[name] = term.physical_std({term.raw_name(p): raw_std.get(key, 0.0) for p, key in raw.items()})
         corr[name] = {p: raw_corr.get(key, 0.0) for p, key in raw.items()}
         nothing, without[name] = _without_term(model, fitted, name, samples, index)

@@ -87,6 +87,11 @@ class ForceModel(nn.Module):
         self.contact = contact
         self._hereditary = KeptGeometry()  # the elastic law's operator at the reference's nodes, step to step
 
+    def fitted_name(self, term: str, name: str) -> str:
+        """The name under which ``term``'s parameter ``name`` is fitted (``named_parameters``: its log's, where it is
+        fitted in log)."""
+        return f"terms.{term}.{self.terms[term].raw_name(name)}"
+
     def depth(self, samples: Samples) -> torch.Tensor:
         """The samples' depth [m], their curve's contact correction applied (estimated contacts)."""
         return samples.depth if self.contact is None else samples.depth - self.contact.shift(samples)
