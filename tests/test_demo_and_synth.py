@@ -1,5 +1,6 @@
 """The bundled demo and the synth command line."""
 
+import re
 from pathlib import Path
 
 import pandas as pd
@@ -79,6 +80,10 @@ def test_synth_writes_a_loadable_set_and_its_truth_outside(tmp_path):
         (["--replicates", "0"], "--replicates must be 1 or more"),
     ],
 )
-def test_synth_refuses_bad_effects_and_options_out_of_range_in_one_line(tmp_path, arguments, message):
-    with pytest.raises(SystemExit, match=message):
+def test_synth_refuses_bad_effects_and_options_out_of_range_in_one_line(tmp_path, capsys, arguments, message):
+    # Exit code 2 and one line on stderr, as every face refuses what a user can fix (the synth exited 1).
+    with pytest.raises(SystemExit) as stop:
         main(["--out", str(tmp_path / "set"), "--truth", str(tmp_path / "truth.yaml"), *arguments])
+    said = capsys.readouterr().err
+    assert stop.value.code == 2 and said.count("\n") == 1 and re.search(message, said)
+    assert not (tmp_path / "set").exists()

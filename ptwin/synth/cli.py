@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from dataclasses import asdict
 from pathlib import Path
 
@@ -31,6 +32,10 @@ from ptwin.synth.maps import MapLayout, write_map
 from ptwin.synth.simulator import EFFECTS, Experiment, Hold, simulate
 
 
+class Refused(ValueError):
+    """An option the synth cannot use, in one line: ``main`` prints it and exits with code 2, as every face does."""
+
+
 def parse_holds(items: list[str], speeds: list[float] | None = None, creep: bool = False) -> tuple[Hold, ...]:
     """``DEPTH:SECONDS`` (a ramp-and-hold at every speed: each of ``speeds`` where given) or
     ``DEPTH:SECONDS:SPEED`` (at one), SI units; ``creep``: the force held instead of the base."""
@@ -39,9 +44,9 @@ def parse_holds(items: list[str], speeds: list[float] | None = None, creep: bool
         try:
             values = [float(part) for part in item.split(":")]
         except ValueError:
-            raise SystemExit(f"{option} {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED in SI units") from None
+            raise Refused(f"{option} {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED in SI units") from None
         if len(values) not in (2, 3) or values[0] <= 0 or values[1] < 0 or (len(values) == 3 and values[2] <= 0):
-            raise SystemExit(f"{option} {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED, depth and speed > 0")
+            raise Refused(f"{option} {item!r}: write DEPTH:SECONDS or DEPTH:SECONDS:SPEED, depth and speed > 0")
         if len(values) == 3 or speeds is None:
             holds.append(Hold(*values, creep=creep))
         else:
@@ -56,10 +61,10 @@ def proposed_holds(diagnosis: Path | None) -> tuple[Hold, ...]:
     try:
         groups = json.loads(diagnosis.read_text())["confounded"]
     except (OSError, ValueError, KeyError) as error:
-        raise SystemExit(f"--next-experiment {diagnosis}: not a readable diagnosis.json ({error})") from None
+        raise Refused(f"--next-experiment {diagnosis}: not a readable diagnosis.json ({error})") from None
     proposals = [group["next_experiment"] for group in groups if group.get("next_experiment")]
     if not proposals:
-        raise SystemExit(f"--next-experiment {diagnosis}: it proposes no next experiment")
+        raise Refused(f"--next-experiment {diagnosis}: it proposes no next experiment")
     distinct = {json.dumps([p["protocol"], p["repeats"]]): p for p in proposals}.values()  # groups may agree
     return tuple(hold for proposal in distinct for hold in Hold.proposed(proposal))
 
@@ -70,16 +75,16 @@ def parse_effects(items: list[str], option: str = "--effect") -> dict[str, dict[
         term, _, assignment = item.partition(":")
         name, _, value = assignment.partition("=")
         if term not in EFFECTS or not name or not value:
-            raise SystemExit(f"{option} {item!r}: write TERM:PARAM=VALUE with TERM one of {', '.join(EFFECTS)}")
+            raise Refused(f"{option} {item!r}: write TERM:PARAM=VALUE with TERM one of {', '.join(EFFECTS)}")
         try:
             effects.setdefault(term, {})[name] = float(value)
         except ValueError:
-            raise SystemExit(f"{option} {item!r}: {value!r} is not a number") from None
+            raise Refused(f"{option} {item!r}: {value!r} is not a number") from None
     return effects
 
 
 def physical_effects(effects: dict[str, dict[str, float]], probe_radius: float, option: str = "--effect") -> None:
-    """``SystemExit`` with one line where a vocabulary term's values are outside its physical range (the range a
+    """``Refused`` (one line) where a vocabulary term's values are outside its physical range (the range a
     fit's ``Term.violation`` rejects, or a non-positive value of a parameter fitted in its log): the simulator would
     integrate them to NaN."""
     for term, values in effects.items():
@@ -90,7 +95,7 @@ def physical_effects(effects: dict[str, dict[str, float]], probe_radius: float, 
         except ValueError:  # math.log of a log-parameter ≤ 0
             violation = f"{', '.join(n for n, p in VOCABULARY[term].PARAMS.items() if p.log)} must be positive"
         if violation:
-            raise SystemExit(f"{option} {term}: {values} is not physical ({violation})")
+            raise Refused(f"{option} {term}: {values} is not physical ({violation})")
 
 
 def refuse_out_of_range(args: argparse.Namespace) -> None:
@@ -177,14 +182,22 @@ def _parser(defaults: Experiment) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> None:
-    defaults = Experiment()
-    args = _parser(defaults).parse_args(argv)
+    args = _parser(Experiment()).parse_args(argv)
+    try:
+        _generate(args)
+    except Refused as error:
+        print(error, file=sys.stderr)
+        raise SystemExit(2) from None
+
+
+def _generate(args: argparse.Namespace) -> None:
+    """The recording set (or map) and its truth that ``args`` ask for, or ``Refused`` saying what cannot be."""
     if args.truth.resolve().is_relative_to(args.out.resolve()):
-        raise SystemExit(f"--truth {args.truth}: keep the truth outside the recording folder {args.out}")
+        raise Refused(f"--truth {args.truth}: keep the truth outside the recording folder {args.out}")
     try:
         refuse_out_of_range(args)  # first: a term's physical range is read against --probe-radius
     except ValueError as error:
-        raise SystemExit(str(error)) from None
+        raise Refused(str(error)) from None
     effects, region = parse_effects(args.effect), parse_effects(args.region_effect, "--region-effect")
     physical_effects(effects, args.probe_radius)
     physical_effects(region, args.probe_radius, "--region-effect")
@@ -216,7 +229,7 @@ def main(argv: list[str] | None = None) -> None:
             effects=effects,
         )
     except ValueError as error:
-        raise SystemExit(str(error)) from None
+        raise Refused(str(error)) from None
     if args.map:
         try:
             layout = MapLayout(
@@ -227,7 +240,7 @@ def main(argv: list[str] | None = None) -> None:
                 region_radius=args.region_radius,
             )
         except ValueError as error:
-            raise SystemExit(str(error)) from None
+            raise Refused(str(error)) from None
         table = write_map(args.out, args.truth, experiment, layout)
         print(f"wrote {args.out} ({len(table)} spots, {int(table['in_region'].sum())} in the region) and {args.truth}")
         return
