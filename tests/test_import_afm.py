@@ -101,9 +101,7 @@ class StressRelaxation:
 
 
 def test_a_stress_relaxation_is_read_whole_and_its_pause_is_not_the_approach(tmp_path, monkeypatch, capsys):
-    import afmformats
-
-    monkeypatch.setattr(afmformats, "load_data", lambda path, meta_override=None: [StressRelaxation()])
+    read_as(monkeypatch, tmp_path, ["cell.jpk-force"], lambda path, meta_override=None: [StressRelaxation()])
     main(["cell.jpk-force", "--out", str(tmp_path / "set"), *COMMON])
     assert "cell.jpk-force as v10h (the pause (200 samples) and the retract (200 samples) not written)" in (
         capsys.readouterr().out
@@ -130,11 +128,20 @@ def test_a_file_lacking_its_calibration_says_which_options_to_pass(tmp_path, cap
     assert "--sensitivity" in error and "--spring-constant" in error
 
 
-def refused(tmp_path, monkeypatch, capsys, name: str, datasets: list) -> str:
-    """The one line ``main`` ends with on a file afmformats reads as ``datasets``: exit code 2, nothing written."""
+def read_as(monkeypatch, tmp_path, names: list[str], load_data) -> None:
+    """afmformats made to read the files ``names`` (empty, in ``tmp_path``, the working folder) with ``load_data``
+    (path ↦ its datasets): curves no vendor file holds, under the names a user would give."""
     import afmformats
 
-    monkeypatch.setattr(afmformats, "load_data", lambda path, meta_override=None: datasets)
+    monkeypatch.chdir(tmp_path)
+    for name in names:
+        (tmp_path / name).touch()
+    monkeypatch.setattr(afmformats, "load_data", load_data)
+
+
+def refused(tmp_path, monkeypatch, capsys, name: str, datasets: list) -> str:
+    """The one line ``main`` ends with on a file afmformats reads as ``datasets``: exit code 2, nothing written."""
+    read_as(monkeypatch, tmp_path, [name], lambda path, meta_override=None: datasets)
     with pytest.raises(SystemExit) as stop:
         main([name, "--out", str(tmp_path / "set"), *COMMON])
     assert stop.value.code == 2
@@ -179,6 +186,20 @@ def test_a_file_afmformats_does_not_read_is_refused_in_one_line(tmp_path, capsys
     assert stop.value.code == 2
     error = capsys.readouterr().err.strip()
     assert error.count("\n") == 0 and "notes.txt: not a format afmformats reads" in error
+
+
+def test_a_path_that_is_not_a_file_is_refused_as_such(tmp_path, capsys):
+    # It was refused as "not a format afmformats reads", which sent a user with a mistyped path to re-export.
+    folder = f"{tmp_path}: a folder; give the curve files in it (e.g. {tmp_path}/*.jpk-force)"
+    missing = tmp_path / "spot 1.jpk-force"
+    for path, said in (
+        (missing, f"{missing}: no such file; check the path (quote a name with spaces)"),
+        (tmp_path, folder),
+    ):
+        with pytest.raises(SystemExit) as stop:
+            main([str(path), "--out", str(tmp_path / "set"), *COMMON])
+        assert stop.value.code == 2 and capsys.readouterr().err.strip() == said
+    assert not (tmp_path / "set").exists()
 
 
 @vendor
@@ -235,7 +256,7 @@ def test_force_map_files_become_one_recording_set_per_spot(tmp_path, monkeypatch
             curves[3] = Truncated(curves[3])
         return curves
 
-    monkeypatch.setattr(afmformats, "load_data", load_data)
+    read_as(monkeypatch, tmp_path, ["slow.jpk-force-map", "fast.jpk-force-map"], load_data)
     main(["slow.jpk-force-map", "fast.jpk-force-map", "--map", "--out", str(tmp_path / "map"), *COMMON])
     spots = sorted(p.name for p in (tmp_path / "map").iterdir())
     assert spots == ["spot_000_000", "spot_000_001", "spot_001_000", "spot_001_001"]

@@ -58,6 +58,10 @@ HEIGHT = "height (measured)"
 def load_datasets(path: Path, overrides: dict) -> list:
     """Every force-distance dataset afmformats reads from ``path`` (one for a curve file, one per spot and
     curve for a force map); JPK's text exports, which it does not read, through ``ptwin.data.jpk_text``."""
+    if path.is_dir():  # afmformats says "not a format it reads" of a folder or a path that is not there
+        raise RecordingError(f"{path}: a folder; give the curve files in it (e.g. {path}/*.jpk-force)")
+    if not path.is_file():
+        raise RecordingError(f"{path}: no such file; check the path (quote a name with spaces)")
     if jpk_text.is_text_export(path):
         return jpk_text.load(path, overrides, SEGMENTS_OF)
     quiet = logging.getLogger("afmformats")
