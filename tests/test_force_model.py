@@ -179,3 +179,10 @@ def test_a_law_that_falls_with_depth_is_no_solids_and_its_fit_is_rejected(tmp_pa
     fit = fit_physics(absurd, samples, torch.nonzero(samples.in_contact).squeeze(1), iterations=0)
     assert "falls by" in fit.violations["solid_viscosity"] and not fit.physical
     assert not fit.settled  # no step taken: the cap, not the fit, ended it
+    # A law that falls is each term's reason: a pair's state said it twice ("rejected: … falls by 17.2 nN …; … falls
+    # by 17.2 nN …", a pore pair on real agarose).
+    fall = fit.violations["solid_viscosity"]
+    pair = dataclasses.replace(
+        fit, violations={"solid_viscosity": fall, "cantilever_drag": fall, "solid_relaxation": "g < 0"}
+    )
+    assert pair.why_not_physical == f"{fall}; g < 0"

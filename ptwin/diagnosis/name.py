@@ -77,7 +77,7 @@ class Candidate:
         if self.fit is None:
             return f"fit failed: {self.failure}"
         if not self.fit.physical:
-            return "rejected: " + "; ".join(self.fit.violations.values())
+            return "rejected: " + self.fit.why_not_physical
         if self.fit.degenerate:
             return "; ".join(f"{term} does nothing ({why})" for term, why in self.fit.degenerate.items())
         return "physical"
@@ -422,7 +422,5 @@ def rejected(candidates: dict, bic_margin: float) -> list[dict]:
         if c.fit is None:
             listed.append({"term": terms[0], "params": {}, "why": c.state})
         elif not c.fit.physical and base - c.fit.bic > bic_margin:
-            listed.append(
-                {"term": terms[0], "params": c.fit.params[terms[0]], "why": "; ".join(c.fit.violations.values())}
-            )
+            listed.append({"term": terms[0], "params": c.fit.params[terms[0]], "why": c.fit.why_not_physical})
     return listed

@@ -93,6 +93,12 @@ class PhysicsFit:
         return not self.violations
 
     @property
+    def why_not_physical(self) -> str:
+        """Every reason its values are not physical, once each ('' where they are): an elastic law that falls is
+        every term's reason, said once."""
+        return "; ".join(dict.fromkeys(self.violations.values()))
+
+    @property
     def usable(self) -> bool:
         """Physical and with every term still acting: a candidate explanation."""
         return self.physical and not self.degenerate

@@ -23,7 +23,7 @@ from ptwin.reporting.report import NOT_PHYSICAL, write_report
 
 def physics_stage(fit: PhysicsFit, samples: Samples, split: Split) -> dict:
     """K, the terms' parameters, their standard deviations and the held-out RMSE [N] of one physics fit."""
-    reasons = "; ".join(fit.violations.values())
+    reasons = fit.why_not_physical
     return {
         "permeability": fit.permeability,
         "permeability_std": fit.permeability_std,
