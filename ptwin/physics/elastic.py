@@ -94,8 +94,7 @@ class ReferenceCurve(nn.Module):
         """The law's dF/dw [N/m] at ``depth`` [m]: between the nodes as read off the local lines, beyond the
         deepest node the continued sphere's (1.5·b·√w, b its line's slope in w^1.5), 0 before contact."""
         w = np.maximum(depth, 0.0)
-        tail = self.reference_force[-self.tail_slope.numel() :]
-        beyond = 1.5 * float(self.tail_slope @ tail) * np.sqrt(w)
+        beyond = 1.5 * float(self.continued_slope(self.reference_force)) * np.sqrt(w)
         return np.where(w > self.deepest, beyond, np.interp(w, self.depth_nodes.cpu().numpy(), self._stiffness))
 
     def noise_gain(self, depth: np.ndarray, spring_constant: float) -> np.ndarray:
@@ -106,6 +105,11 @@ class ReferenceCurve(nn.Module):
         noise's on average without it. A force added at the tip reaches the recording divided by it
         (``ptwin.pipeline.inject``)."""
         return 1.0 + self.stiffness(depth) / spring_constant
+
+    def continued_slope(self, node_values: torch.Tensor) -> torch.Tensor:
+        """The slope in w^1.5 of the line that values at the depth nodes ((nodes,) or (nodes, …)) continue along
+        beyond the deepest (the class docstring): fitted through the deepest ``TAIL`` of them."""
+        return torch.tensordot(self.tail_slope, node_values[-self.tail_slope.numel() :], dims=1)
 
     def smooth(self, values: np.ndarray) -> np.ndarray:
         """Values on the reference's samples (in depth order; (samples, …)) smoothed onto the depth nodes as the
@@ -168,7 +172,9 @@ class ReferenceCurve(nn.Module):
         index, t = self.bracket(depth)
         trailing = (...,) + (None,) * (node_values.dim() - 1)
         between = torch.lerp(node_values[index], node_values[index + 1], t[trailing])
-        slope = torch.tensordot(self.tail_slope, node_values[-self.tail_slope.numel() :], dims=1)
-        continued = node_values[-1] + slope * (depth.clamp(min=0.0) ** 1.5 - self.deepest**1.5)[trailing]
+        continued = (
+            node_values[-1]
+            + self.continued_slope(node_values) * (depth.clamp(min=0.0) ** 1.5 - self.deepest**1.5)[trailing]
+        )
         inside = torch.where((depth > self.deepest)[trailing], continued, between)
         return inside * self.contact_weight(depth)[trailing]
