@@ -12,7 +12,6 @@ from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
-import threadpoolctl
 import torch
 
 from ptwin.pgd.basis import Basis
@@ -20,6 +19,7 @@ from ptwin.pgd.compression import force_amplitudes, force_modes, recompress
 from ptwin.pgd.config import PGDConfig
 from ptwin.pgd.enrichment import enrich
 from ptwin.pgd.problem import build_problem
+from ptwin.threads import one_thread
 
 
 def build_basis(config: PGDConfig, progress: Callable[[str], None] = print) -> Basis:
@@ -29,23 +29,8 @@ def build_basis(config: PGDConfig, progress: Callable[[str], None] = print) -> B
     The pressure field stored is the fine mesh's; the force is the extrapolated one. Where a second core is free
     (``_may_fork``) the coarse mesh is solved in a forked process beside the fine one, to the same bits.
     """
-    with _one_thread():
+    with one_thread():
         return _build(config, progress)
-
-
-@contextmanager
-def _one_thread():
-    """torch and the BLAS under numpy on one thread while a basis is built: the greedy enrichment follows every
-    rounding of its sums, so the same configuration built on two threads and on one gave different bases ([75, 63]
-    modes against [71, 68]; the demo's base-model whiteness 1505 against 739, the same verdict). A cached basis is
-    then the same whatever the machine's thread count, and the build no slower (1.8–1.9 s either way)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        with threadpoolctl.threadpool_limits(limits=1):
-            yield
-    finally:
-        torch.set_num_threads(threads)
 
 
 def _build(config: PGDConfig, progress: Callable[[str], None]) -> Basis:
@@ -90,7 +75,7 @@ def _solved(config: PGDConfig, rings: int, progress: Callable[[str], None]):
 def _coarse_force(config: PGDConfig, rings: int):
     """(β, parameter factors) of ``force_modes`` on the Richardson mesh of ``rings`` rings, solved as
     ``build_basis`` solves it (one thread)."""
-    with _one_thread():
+    with one_thread():
         problem, solution = _solved(config, rings, lambda line: None)
         return force_modes(solution, problem.dims)
 

@@ -14,7 +14,7 @@ import os
 from collections.abc import Callable, Iterator, Sequence
 from functools import partial
 
-import torch
+from ptwin.threads import one_thread
 
 SERIAL, LOCAL = "serial", "local"
 CONNECT_SECONDS = 10
@@ -26,9 +26,9 @@ class EngineError(ValueError):
 
 
 def _single_threaded(function: Callable, item):
-    torch.set_num_threads(1)
     _heap_for_tensors()
-    return function(item)
+    with one_thread():
+        return function(item)
 
 
 def _heap_for_tensors() -> None:

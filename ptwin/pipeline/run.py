@@ -43,6 +43,7 @@ from ptwin.reporting.results import (
     write_outputs,
 )
 from ptwin.reporting.tensorboard import TrainingLog
+from ptwin.threads import one_thread
 
 # Without a hybrid twin (a map's spots), the base model's residual in contact less a polynomial of this degree in
 # time per curve stands in for the twin's: about as flexible over a curve as its 6 neurons, it takes a term's
@@ -75,8 +76,9 @@ class RunResult:
     alone: dict = field(default_factory=dict)  # ``Diagnosis.alone``: the profiled terms' strengths' intervals
 
 
+@one_thread()
 def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = print) -> RunResult:
-    """Run the chain for ``settings`` and leave its results in ``output_dir``."""
+    """Run the chain for ``settings`` and leave its results in ``output_dir``, on one thread (``ptwin.threads``)."""
     started = time.perf_counter()
     torch.manual_seed(settings.seed)
     output_dir.mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,47 @@
+"""ptwin's numerics on one thread (``ptwin.threads``): within a build, a diagnosis and a map's spot, and the caller's
+thread counts given back after, an error or not."""
+
+from types import SimpleNamespace
+
+import pytest
+import threadpoolctl
+import torch
+
+from ptwin.threads import one_thread
+
+
+def counts() -> tuple[int, set[int]]:
+    """(torch's threads, the thread counts of the BLAS and OpenMP pools numpy and torch loaded)."""
+    return torch.get_num_threads(), {pool["num_threads"] for pool in threadpoolctl.threadpool_info()}
+
+
+@pytest.fixture
+def two_threads():
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    yield
+    torch.set_num_threads(before)
+
+
+def test_within_one_thread_and_the_callers_after(two_threads):
+    with one_thread():
+        assert counts() == (1, {1})
+    assert torch.get_num_threads() == 2
+
+
+def test_a_diagnosis_runs_on_one_thread_and_gives_the_callers_back_when_it_fails(two_threads, monkeypatch, tmp_path):
+    import ptwin.pipeline.run as chain
+
+    class Stopped(Exception):
+        pass
+
+    seen = []
+
+    def prepare(settings, progress):  # the chain's first stage: what it runs on, then stop
+        seen.append(counts())
+        raise Stopped
+
+    monkeypatch.setattr(chain, "prepare", prepare)
+    with pytest.raises(Stopped):
+        chain.run(SimpleNamespace(seed=0), tmp_path)
+    assert seen == [(1, {1})] and torch.get_num_threads() == 2
