@@ -63,3 +63,16 @@ def test_where_an_interval_allows_a_terms_absence(term, name, interval, allowed)
     from ptwin.physics.terms import VOCABULARY
 
     assert VOCABULARY[term].PARAMS[name].allows_absence(interval) is allowed
+
+
+def test_a_held_out_gain_short_of_its_margin_reads_short_of_it():
+    # discover-bench's loop "strain perm. vs base, soft" at seed 3, third round: the strain-dependent K named weak,
+    # "on curves left out of the fit it predicts 1.10× better … improves the prediction by only 10% (needs 10%)".
+    from ptwin.diagnosis.words import short_of, times_better
+
+    verdict = grade(410.0, [], None, HeldOut(1.0996, {"t.p": 0.1}, 4), bic_margin=10.0, heldout_margin=0.1)
+    assert verdict.confidence == "weak"
+    assert "on curves left out of the fit it improves the prediction by only 9.96% (needs 10%)" in verdict.reasons
+    assert times_better(1.0996, 1.1) == "1.0996× better" and times_better(1.0996) == "1.10× better"
+    assert times_better(1.2, 1.1) == "1.20× better" and short_of(9.4, 10.0, 0) == "9"  # where it reads short already
+    assert short_of(9.999999999, 10.0, 0) == "9.999999"  # as many decimals as it takes, up to six more

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ptwin.diagnosis.words import times_better
+from ptwin.diagnosis.words import short_of, times_better
 from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, fit_physics, fitted_difference, held_as
 from ptwin.physics.samples import Samples
@@ -161,7 +161,7 @@ def grade(
         elif held_out.gain < 1 + heldout_margin:
             serious.append(
                 f"on curves left out of the fit it improves the prediction by only "
-                f"{100 * (held_out.gain - 1):.0f}% (needs {100 * heldout_margin:.0f}%)"
+                f"{short_of(100 * (held_out.gain - 1), 100 * heldout_margin, 0)}% (needs {100 * heldout_margin:.0f}%)"
             )
         unstable = {name: s for name, s in held_out.spread.items() if not s <= STABLE}
         if unstable:

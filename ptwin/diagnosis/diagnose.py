@@ -517,7 +517,7 @@ def _leaving_structure(
     short = [
         f"{term} could not be tested on curves left out of the fit ({held.reason})"
         if isinstance(held, FoldFailed)
-        else f"on curves left out of the fit {term} predicts {times_better(held.gain)}"
+        else f"on curves left out of the fit {term} predicts {times_better(held.gain, 1 + margin)}"
         for term, held in curves.items()
         if isinstance(held, FoldFailed) or (held is not None and held.gain < 1 + margin)
     ]
@@ -794,12 +794,15 @@ def _left_out_entry(term, chosen, c: _Context, alternatives, make_model, s: Diag
         "param_std": {p: _wald(std, intervals[p], corrected) for p, std in corrected.param_std[term].items()},
         "param_interval": intervals,
         "confidence": verdict.confidence,
-        "evidence": _evidence(term, without, removal, held_out, verdict, c),
+        "evidence": _evidence(term, without, removal, held_out, verdict, c, 1 + s.heldout_margin),
         "test_rmse_gain": gain,
     }
 
 
-def _evidence(term: str, without: Candidate, removal: float, held_out: OnCurvesLeftOut, verdict: Grade, c) -> str:
+def _evidence(
+    term: str, without: Candidate, removal: float, held_out: OnCurvesLeftOut, verdict: Grade, c, needed: float
+) -> str:
+    """The evidence of a named term in words; ``needed``: the held-out ratio a strong verdict needs."""
     corrected = c.corrected
     beside = together_with(corrected.terms, without.terms, term)  # the terms weighed with it, if any
     sentence = (
@@ -808,7 +811,7 @@ def _evidence(term: str, without: Candidate, removal: float, held_out: OnCurvesL
         f"({corrected.val_rmse / c.noise.std:.2f}× the noise std)"
     )
     if isinstance(held_out, HeldOut):
-        sentence += f"; on curves left out of the fit it predicts {times_better(held_out.gain)}"
+        sentence += f"; on curves left out of the fit it predicts {times_better(held_out.gain, needed)}"
     if c.witness is not None:
         sentence += f"; {_witness_words(c.witness)}"
     sentence += "."
