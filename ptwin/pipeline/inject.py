@@ -42,6 +42,7 @@ from ptwin.physics.terms import VOCABULARY
 from ptwin.pipeline.prepare import Prepared, prepare
 from ptwin.pipeline.run import RunResult, candidate_settings, run
 from ptwin.pipeline.settings import InjectRunSettings
+from ptwin.threads import one_thread
 
 BASE_PERMEABILITY = (
     "Beside a term not named, the base model's K: a rate force added can be carried by the base model's fluid force "
@@ -240,9 +241,11 @@ def judged_peak(prepared: Prepared, added: dict[str, np.ndarray]) -> float:
     return max(float(force.max(initial=0.0)) for force in judged) / prepared.noise.std
 
 
+@one_thread()
 def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[[str], None] = print) -> list[Trial]:
     """Diagnose the recordings as they are, then with the term added at each size; the report of the first
-    gets a section on what these recordings could have shown."""
+    gets a section on what these recordings could have shown. On one thread, its sizes' fits as each diagnosis
+    (``ptwin.threads``)."""
     inject = settings.inject
     strength = VOCABULARY[inject.term].strength()
     progress(f"inject: the recordings as they are ({len(inject.sizes) + 1} diagnoses in all)")
@@ -262,6 +265,7 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
     return trials
 
 
+@one_thread()
 def detection_limits(
     settings: InjectRunSettings, output_dir: Path, progress: Callable[[str], None] = print
 ) -> dict[str, list[Trial]]:
