@@ -17,7 +17,9 @@ The grade (README, "Confidence"):
 - moderate: at most one shortfall, and a mild one — a smaller BIC cost (still ≥ the
   margin), too few curves to hold one out, or parameters that vary across folds;
 - weak: anything else, in particular a confounded, implausible or held-out-contradicted
-  term, one left untested where a fold could not be fitted (``FoldFailed``), one whose 95%
+  term, one whose gain on the validation samples is within what noise and model error give
+  (named because it alone leaves no structure where the base model leaves it), one left
+  untested where a fold could not be fitted (``FoldFailed``), one whose 95%
   profile interval under the noise model reaches the value where it does nothing (γ = 0,
   M → ∞): the tests that named it weigh its own shape, the interval every nuisance refitted
   with it; or one named beside structure that no term explains (its size is what it takes in
@@ -131,11 +133,15 @@ def grade(
     heldout_margin: float,
     absent_within: Sequence[str] = (),
     unexplained: str | None = None,
+    unproven: str | None = None,
 ) -> Grade:
     """The confidence of one named term from its evidence (rules in the module docstring); ``absent_within``:
     the values where the term does nothing that its 95% intervals reach, in words (e.g. 'gamma = 0');
-    ``unexplained``: the structure the named model leaves, in words (None: none)."""
+    ``unexplained``: the structure the named model leaves, in words (None: none); ``unproven``: its gain on the
+    validation samples, in words, where that is within what noise and model error give (None: beyond it)."""
     mild, serious = [], []
+    if unproven is not None:
+        serious.append(f"on the validation samples {unproven}")
     if unexplained is not None:
         serious.append(
             f"structure remains that no term of the vocabulary explains ({unexplained}), so its size is what it "

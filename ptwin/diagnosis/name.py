@@ -290,6 +290,11 @@ class HeldOutEvidence:
     def beyond(self) -> bool:
         return any(part.beyond for part in self.parts)
 
+    @property
+    def gain(self) -> float:
+        """The units of χ² the larger model takes off the validation samples, in contact and before it together."""
+        return sum(part.gain for part in self.parts)
+
     def words(self) -> str:
         contact, *pinning = (part.words() for part in self.parts)
         return contact + "".join(f"; on the samples just before contact, {words}" for words in pinning)
