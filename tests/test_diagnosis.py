@@ -1342,3 +1342,27 @@ def test_structure_a_term_alone_leaves_as_noise_names_it_weak_though_the_validat
     assert _rivals(candidates, pick, DiagnosisSettings(terms=[]), held_out) == [("c",)]
     verdict = grade(600.0, ["c"], None, HeldOut(1.5, {}, 3), 10.0, 0.1, unproven=pick.unproven["a"])
     assert verdict.confidence == "weak" and verdict.reasons[0] == f"on the validation samples {pick.unproven['a']}"
+
+
+def test_a_term_that_leaves_the_residual_as_noise_and_passes_every_test_alone_is_named_without_the_caveat():
+    # The selection starts from the least BIC (a pair that leaves structure) and prunes on the way down: a first
+    # (cheapest to remove), then b, which fails the validation samples against the base model. a alone leaves no
+    # structure and is beyond the noise there: named as it stands, its note without "not beyond".
+    from ptwin.diagnosis.null import TermEvidence
+
+    class OnlyABeyond:
+        @staticmethod
+        def evidence(smaller, larger, label):
+            gain = 100.0 if (smaller.terms, larger.terms) == ((), ("a",)) else 5.0
+            return TermEvidence(label, gain, 10.0, 1.0, 0.01)
+
+    candidates = {
+        (): candidate((), 2000.0, 1.0e-9, whiteness=50.0),
+        ("a",): candidate(("a",), 1000.0, 0.5e-9, whiteness=2.0),
+        ("b",): candidate(("b",), 950.0, 0.5e-9, whiteness=8.0),
+        ("a", "b"): candidate(("a", "b"), 900.0, 0.5e-9, whiteness=8.0),
+    }
+    pick = select(candidates, 0.49e-9, {}, OnlyABeyond())
+    assert pick.chosen == ("a",) and not pick.unexplained and pick.unproven == {}
+    assert pick.notes[0].startswith("a pruned from a + b") and pick.notes[1].startswith("b pruned")
+    assert pick.notes[-1].endswith("and predicts the validation samples better: named")

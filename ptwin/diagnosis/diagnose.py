@@ -509,10 +509,11 @@ def _explains_alone(
             return None
         if not validation.beyond:
             unproven[term] = validation.words()
-    named = " + ".join(best.terms)
+    # every term beyond the noise there too: pruned from a larger subset on the way down, it stands on its own
+    how = ", though not beyond what noise and model error give: named, weak" if unproven else ": named"
     why = (
-        f"{named} leaves no structure ({test.words(best.whiteness)}) where the base model leaves it, and predicts the "
-        f"validation samples better, though not beyond what noise and model error give: named, weak"
+        f"{' + '.join(best.terms)} leaves no structure ({test.words(best.whiteness)}) where the base model leaves "
+        f"it, and predicts the validation samples better{how}"
     )
     return _Selection(True, best.terms, notes=[why], unproven=unproven)
 
