@@ -17,7 +17,10 @@ to the recorded force; z, time and the noise stay as recorded, and the depth fol
 Limits. First order: where δF changes the depth enough to change ΔF or s (δF/k_c not small against
 the depth over which they vary) the term is added approximately. The term adds to whatever the
 recordings hold already, so each size is read against the diagnosis of the recordings as they are.
-It is added on the base model's K, even where the data do not fix K.
+It is added on the base model's K, even where the data do not fix K. A contact offset is added as the force it
+changes in contact: the recorded onset stays where it was, and the term's own check reads a fitted offset against
+it (bench-set p01 with 147 nm added: "delta = 147 nm puts the contact where the recording pushes 3.48 nN", rejected),
+so on a set whose contacts are known its ladder can read "not named" at every size.
 """
 
 from __future__ import annotations
