@@ -1301,8 +1301,8 @@ def test_structure_a_term_alone_leaves_as_noise_names_it_weak_though_the_validat
     # predicts the validation samples better is named, weak, with the validation samples' words as its reason; the
     # rivals are those that leave no structure either (b, which leaves it, is no rival however the samples read).
     # Only where the hybrid twin predicts the validation samples no better than a model error would (0.49 nN against
-    # the term's 0.5 on a noise of 1 nN; at 0.3 it learned what the term misses, as a contact 147 nm early added to
-    # p01 left a strain-dependent K white by the test at 2.0× the noise std where the twin reached 1.1×), and a twin
+    # the term's 0.5 on a noise of 1 nN; at 0.3 it learned what the term misses, as a contact offset of 147 nm added
+    # to p01 left a strain-dependent K white by the test at 2.0× the noise std where the twin reached 1.1×), and a twin
     # there must be (none: nothing vouches for it).
     from ptwin.diagnosis.confidence import HeldOut, grade
     from ptwin.diagnosis.diagnose import DiagnosisSettings, _rivals

@@ -490,8 +490,8 @@ def _explains_alone(
     vouches for it). "Unexplained" would say no term explains a residual one of them leaves as noise: a solid
     relaxation of 16× the noise added to bench-set p02 left whiteness 1.3 against 4.9 where the base model left
     11.1, cost 397 BIC to remove, and took 23 units of χ² off the validation samples where noise and model error
-    give up to 37 (at three other split seeds 52 to 78, named); the twin 0.271 nN against its 0.273. A contact 147 nm
-    early added to p01, which no contact offset explains (its onset contradicts the samples before contact), left a
+    give up to 37 (at three other split seeds 52 to 78, named); the twin 0.271 nN against its 0.273. A contact offset of
+    147 nm added to p01, which no contact offset explains (its onset contradicts the samples before contact), left a
     strain-dependent K white by the test (3.1 against 9.7) at 2.0× the noise std, where the twin reached 1.1×: no
     term is named there. Else None: the structure stays unexplained."""
     shaped = [c for t, c in candidates.items() if t and c.usable and c.fit.plausible and not c.leaves_structure(test)]
