@@ -26,6 +26,7 @@ from ptwin.diagnosis.name import (
     shape_evidence,
     together_with,
     weighed_against,
+    without_structure,
 )
 from ptwin.diagnosis.null import (
     MODEL_ERROR,
@@ -494,11 +495,10 @@ def _explains_alone(
     147 nm added to p01, which no contact offset explains (its onset contradicts the samples before contact), left a
     strain-dependent K white by the test (3.1 against 9.7) at 2.0× the noise std, where the twin reached 1.1×: no
     term is named there. Else None: the structure stays unexplained."""
-    shaped = [c for t, c in candidates.items() if t and c.usable and c.fit.plausible and not c.leaves_structure(test)]
+    shaped = without_structure(candidates, test, plausible=True)
     if not shaped or flexible is None:
         return None
-    smallest = min(len(c.terms) for c in shaped)
-    best = min((c for c in shaped if len(c.terms) == smallest), key=lambda c: c.fit.bic)
+    best = shaped[0]
     if beyond_model_error(flexible, best.val_rmse, noise_std):
         return None
     unproven = {}

@@ -416,6 +416,20 @@ def confounded(candidates: dict, chosen: tuple[str, ...], bic_margin: float, hel
     ]
 
 
+def without_structure(candidates: dict, test: StructureTest, plausible: bool = False) -> list[Candidate]:
+    """The usable subsets of fewest terms whose fits leave no structure ``test`` sees, the least BIC first; with
+    ``plausible``, only those at values the field has (``PhysicsFit.plausible``), the fewest terms among them."""
+    shaped = [
+        c
+        for terms, c in candidates.items()
+        if terms and c.usable and not c.leaves_structure(test) and (c.fit.plausible or not plausible)
+    ]
+    if not shaped:
+        return []
+    smallest = min(len(c.terms) for c in shaped)
+    return sorted((c for c in shaped if len(c.terms) == smallest), key=lambda c: c.fit.bic)
+
+
 def rejected(candidates: dict, bic_margin: float) -> list[dict]:
     """Single terms that would have lowered the BIC but only with a non-physical parameter, and
     single terms whose fit failed (``why``: 'fit failed: …')."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 
+from ptwin.diagnosis.name import without_structure
 from ptwin.physics.model import PLAUSIBLE_PERMEABILITY, fluid_off
 
 MICRO = 1e6
@@ -122,12 +123,7 @@ def _without_structure(d, test, most: int = 3) -> list[str]:
     not prove (on bench-set p03 with a solid relaxation of 64× the noise added, its fit left whiteness 1.3 against
     6.6 and took 14 units of χ² off the validation samples where noise and model error give up to 21; the summary
     had said no term explains the residual)."""
-    shaped = [c for terms, c in d.candidates.items() if terms and c.usable and not c.leaves_structure(test)]
-    if not shaped:
-        return []
-    smallest = min(len(c.terms) for c in shaped)
-    ranked = sorted((c for c in shaped if len(c.terms) == smallest), key=lambda c: c.fit.bic)
-    return [" + ".join(c.terms) for c in ranked[:most]]
+    return [" + ".join(c.terms) for c in without_structure(d.candidates, test)[:most]]
 
 
 def _to_make_strong(entries: list[dict]) -> str:
