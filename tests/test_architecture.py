@@ -10,6 +10,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # Lowest first: a room may import its own modules and any room before it, never one after it.
 LAYERS = [
     ("files", "checks", "threads"),
+    ("aside",),
     ("pgd",),
     ("data",),
     ("physics",),

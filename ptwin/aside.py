@@ -1,0 +1,101 @@
+"""Work done aside: a function run in a forked child process while the caller goes on, its result fetched when
+first asked for.
+
+Why: ptwin's numerics run on one thread (``ptwin.threads``), so a run on one set leaves the second core of a
+2-core machine idle, and two stages that do not depend on each other can share the cores: the hybrid twin trains
+while the diagnosis fits its first candidates (``ptwin.pipeline.run``). A thread would share the interpreter's
+lock with the caller (the demo's two stages in 2.0 s on two threads, 1.3 s forked, 2.5 s one after the other).
+A fork, not a pool: the child starts with everything the caller holds (torch imported, the samples prepared),
+nothing pickled on the way in; the result comes back pickled through a pipe (plain ``pickle``: torch's own
+reductions for processes would share tensors through file descriptors that end with the child).
+
+A fork is safe only in a process that never ran numerics on more than one thread (``ptwin.threads``'
+``one_thread_for_good``, which the faces call first thing), on Linux (macOS' system libraries refuse a forked
+child), and outside a daemonic process (a Dask worker), which may have no children. Anywhere else the function
+runs in the caller when its result is first asked for: the same result, later.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import pickle
+import sys
+import traceback
+from collections.abc import Callable
+from typing import Generic, TypeVar
+
+from ptwin.threads import on_one_thread_for_good
+
+T = TypeVar("T")
+
+
+def can_fork() -> bool:
+    """Whether ``Aside`` runs its function in a child here, rather than in the caller when asked."""
+    linux = sys.platform.startswith("linux")
+    return linux and on_one_thread_for_good() and not multiprocessing.current_process().daemon
+
+
+class Aside(Generic[T]):
+    """``function()`` started in a forked child (``fork``, where ``can_fork``); ``result()`` waits for its value,
+    or raises what it raised (its traceback in the child added as a note). Used as a context manager, a child
+    whose result was never asked for is stopped on the way out (the caller failed)."""
+
+    def __init__(self, function: Callable[[], T], fork: bool = True):
+        self._function, self._child, self._pipe = function, None, None
+        self._outcome: tuple[bool, T] | None = None
+        if fork and can_fork():
+            context = multiprocessing.get_context("fork")
+            self._pipe, sending = context.Pipe(duplex=False)
+            self._child = context.Process(target=_serve, args=(function, sending), daemon=True)
+            self._child.start()
+            sending.close()
+
+    @property
+    def forked(self) -> bool:
+        return self._child is not None
+
+    def result(self) -> T:
+        if self._outcome is None:
+            self._outcome = self._fetched() if self.forked else (True, self._function())
+        done, value = self._outcome
+        if not done:
+            raise value
+        return value
+
+    def _fetched(self) -> tuple[bool, T]:
+        try:
+            message = self._pipe.recv_bytes()
+        except EOFError:  # the child died before it could answer (killed, out of memory)
+            message = None
+        finally:
+            self._pipe.close()
+            self._child.join()
+        if message is None:
+            return False, RuntimeError(f"the process working aside ended with exit code {self._child.exitcode}")
+        return pickle.loads(message)
+
+    def __enter__(self) -> Aside[T]:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.forked and self._child.is_alive():
+            self._child.terminate()
+            self._child.join()
+
+
+def _serve(function: Callable[[], T], sending) -> None:
+    """In the child: (True, the value) or (False, the exception) sent back pickled."""
+    try:
+        outcome = (True, function())
+    except BaseException as error:  # everything goes back to the caller, who raises it as its own
+        error.add_note(f"in the process working aside:\n{traceback.format_exc()}")
+        outcome = (False, error)
+    try:
+        message = pickle.dumps(outcome)
+    except Exception as error:  # what does not pickle comes back in words
+        what = "its result" if outcome[0] else f"{type(outcome[1]).__name__} ({outcome[1]})"
+        message = pickle.dumps(
+            (False, RuntimeError(f"the work done aside raised or returned {what}, which did not pickle: {error}"))
+        )
+    sending.send_bytes(message)
+    sending.close()
