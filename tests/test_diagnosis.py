@@ -117,7 +117,7 @@ def test_a_correlation_read_off_the_twins_residual_is_capped_by_what_the_residua
     # no decision on the way to those fits turns between the two readings, they are read under the cap, not made
     # again. The pore relaxation is named as with a twin that fits.
     from ptwin.data.noise import RESIDUAL
-    from ptwin.pipeline.run import CAPPED, READ_UNDER_CAP
+    from ptwin.pipeline.run import CAPPED, READ_UNDER
 
     lines = []
     overrides = ("optim.hybrid.iterations=2", "diagnosis.design=false")
@@ -125,7 +125,7 @@ def test_a_correlation_read_off_the_twins_residual_is_capped_by_what_the_residua
     noise = result.diagnosis["noise"]
     assert noise["source"] == f"{RESIDUAL}, {CAPPED}"
     assert 1.0 <= noise["inflation"] < 2.5
-    assert any(line.endswith(READ_UNDER_CAP) for line in lines)
+    assert any(line.endswith(READ_UNDER) for line in lines)
     assert [entry["term"] for entry in result.diagnosis["left_out"]] == ["pore_pressure_relaxation"]
 
 

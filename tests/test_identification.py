@@ -125,7 +125,7 @@ def test_the_twin_fits_the_demo_to_its_noise_whatever_the_networks_seed(coarse_c
         settings = settings_for(f"data.path={DEMO}", "pgd=coarse", f"cache_dir={coarse_cache}", f"seed={seed}")
         p = prepare(settings, progress=lambda line: None)
         base = identify(p, settings.optim, progress=lambda line: None, chain=False).base
-        outcome = train_twin(p, base.permeability, p.noise_floor, settings, tmp_path, progress=lambda line: None)
+        outcome = train_twin(p, base.permeability, p.noise_floor, settings, tmp_path)
         test = p.split.test
         with torch.no_grad():
             rmse = (outcome.twin.predict(p.samples)[test] - p.samples.force[test]).square().mean().sqrt().item()

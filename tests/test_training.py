@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from ptwin.fitting import checkpoint
-from tests.conftest import CONFIGS, run, simulated_set
+from tests.conftest import CONFIGS, run, settings_for, simulated_set
 
 
 def quick(*extra):
@@ -51,6 +51,35 @@ def test_same_seed_same_result_and_a_killed_run_resumes_to_it(tmp_path, coarse_c
 
     with pytest.raises(checkpoint.CheckpointError, match="model.hidden: checkpoint 6, now 4"):
         run(folder, coarse_cache, tmp_path / "e", *quick(f"ckpt_path={ckpt}", "model.hidden=4"))
+
+
+def test_the_twin_trained_aside_is_the_twin_trained_here_bit_for_bit(tmp_path, coarse_cache):
+    # In a run on one set the twin trains in a forked child and comes back as its parameters, rebuilt from the
+    # same start (``TwinAside``); where no fork is safe it trains here when first asked for.
+    from ptwin.aside import can_fork
+    from ptwin.pipeline.identify import identify
+    from ptwin.pipeline.prepare import prepare
+    from ptwin.pipeline.twin import TwinAside, train_twin
+
+    folder = simulated_set(tmp_path / "set", base_speeds=(0.5e-6, 8e-6, 80e-6), samples=400)
+    settings = settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}", *quick()[1:])
+    p = prepare(settings, progress=lambda line: None)
+    permeability = identify(p, settings.optim, progress=lambda line: None, chain=False).base.permeability
+    here = train_twin(p, permeability, p.noise_floor, settings, tmp_path / "here")
+    lines = []
+    with TwinAside(p, permeability, p.noise_floor, settings, tmp_path / "aside", lines.append) as aside:
+        assert aside._aside.forked == can_fork()
+        outcome = aside.outcome()
+    assert ("aside" in lines[0]) == can_fork()
+    assert (outcome.val_rmse, outcome.iterations, outcome.regularisation) == (
+        here.val_rmse,
+        here.iterations,
+        here.regularisation,
+    )
+    with torch.no_grad():
+        assert torch.equal(outcome.twin.predict(p.samples), here.twin.predict(p.samples))
+    assert (tmp_path / "aside" / "checkpoint.pt").is_file()
+    assert list((tmp_path / "aside" / "tensorboard").glob("events.out.tfevents.*"))
 
 
 def test_a_multirun_sweep_leaves_one_run_per_value(tmp_path, coarse_cache):

@@ -30,7 +30,7 @@ from ptwin.physics.terms import VOCABULARY
 from ptwin.pipeline.identify import Identification, identify, per_curve_fits
 from ptwin.pipeline.prepare import Prepared, fitted_samples, prepare
 from ptwin.pipeline.settings import Settings
-from ptwin.pipeline.twin import train_twin
+from ptwin.pipeline.twin import TwinAside
 from ptwin.reporting.figures import figure_file, save_figures
 from ptwin.reporting.report import print_summary
 from ptwin.reporting.results import (
@@ -42,7 +42,7 @@ from ptwin.reporting.results import (
     physics_stage,
     write_outputs,
 )
-from ptwin.reporting.tensorboard import TrainingLog
+from ptwin.reporting.tensorboard import write_summary
 from ptwin.threads import one_thread
 
 # Without a hybrid twin (a map's spots), the base model's residual in contact less a polynomial of this degree in
@@ -56,8 +56,8 @@ FLEXIBLE_DEGREE = 6
 # would be 1.44× the noise's, beyond what the structure test's model error tolerates.
 LOW_STD = 1.2
 CAPPED = "its correlation capped by what a model's residual in contact shows (a line removed per curve)"
-READ_UNDER_CAP = "the first fits read under it (no decision on the way to them turns between the two readings)"
-FITTED_UNDER_CAP = "the first fits made again under it"
+READ_UNDER = "the first fits read under it (no decision on the way to them turns between the two readings)"
+FITTED_UNDER = "the first fits made again under it"
 BASE_RESIDUAL = (
     f"base model's residual in contact, less a polynomial of degree {FLEXIBLE_DEGREE} in time per curve "
     "(no baseline of 100 samples)"
@@ -86,11 +86,9 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     samples, split = prepared.samples, prepared.split
     identification = identify(prepared, settings.optim, progress)
     noise = prepared.noise_floor
-    log = TrainingLog(output_dir / "tensorboard", samples, split.train, split.val, noise, settings.optim.hybrid)
-    base_k = identification.base.permeability
-    outcome = train_twin(prepared, base_k, noise, settings, output_dir, log.on_step, progress)
-    log.end_training()
-    diagnosis = diagnose_set(prepared, identification, outcome.twin, settings, progress)
+    with TwinAside(prepared, identification.base.permeability, noise, settings, output_dir, progress) as aside:
+        diagnosis = diagnose_set(prepared, identification, aside.twin, settings, progress)
+        outcome = aside.outcome()
     figures = {}
     if settings.figures:
         figures = save_figures(
@@ -116,7 +114,8 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     }
     hybrid = results["stages"]["hybrid"]
     images = {name: figure_file(output_dir, name) for name in figures}
-    log.close(images, hparams, {"hparam/val_rmse": hybrid["val_rmse"], "hparam/test_rmse": hybrid["test_rmse"]})
+    metrics = {"hparam/val_rmse": hybrid["val_rmse"], "hparam/test_rmse": hybrid["test_rmse"]}
+    write_summary(output_dir / "tensorboard", images, hparams, metrics)
     payload = write_outputs(output_dir, results, diagnosis, figures)
     print_summary(results, payload, progress, diagnosis.permeability)
     progress(f"results in {output_dir} ({results['seconds']:.1f} s)")
@@ -133,30 +132,27 @@ def _alone(diagnosis: Diagnosis, term: str) -> dict[str, float] | None:
 def diagnose_set(
     prepared: Prepared,
     identification: Identification,
-    twin: HybridTwin | None,
+    twin: Callable[[], HybridTwin] | None,
     settings: Settings,
     progress: Callable[[str], None] = print,
 ) -> Diagnosis:
-    """The diagnosis stage on a prepared and identified set (``twin``: the hybrid twin, None when not trained).
-    Where the set's baselines were too short to measure the noise's correlation, it is measured on the twin's
-    residual in contact (``ptwin.data.noise.residual_noise``), or without a twin on the base model's less a
-    polynomial per curve (``FLEXIBLE_DEGREE``), and the base model refitted under it. Where the baselines or the
-    twin's residual measured it, a reading above what the base model's and the single terms' residuals show
-    (``first_fits``, fitted before anything is weighed) is capped (``_capped_by_residuals``), and those fits are
-    read under the cap, or made again where a decision on the way to them turns between the two readings
-    (``ptwin.fitting.inflation_range``): what the twin misses of a term reads as correlation as a baseline's drift
-    does (a pore relaxation with a hold and a creep, white noise: κ² 18.0 off the twin's residual, 1.23 capped)."""
+    """The diagnosis stage on a prepared and identified set (``twin``: the hybrid twin when asked for, None where
+    none is trained). Where the set's baselines were too short to measure the noise's correlation, it is measured
+    on the twin's residual in contact (``ptwin.data.noise.residual_noise``), or without a twin on the base model's
+    less a polynomial per curve (``FLEXIBLE_DEGREE``), whose σ the base model is refitted under. The base model and
+    each single term are fitted first (``first_fits``) under the reading then at hand: before the twin is asked
+    for, so one training aside (``TwinAside``) goes on meanwhile. Where the baselines or the twin's residual
+    measured the correlation, a reading above what those fits' residuals show is capped (``_capped_by_residuals``):
+    what the twin misses of a term reads as correlation as a baseline's drift does (a pore relaxation with a hold
+    and a creep, white noise: κ² 18.0 off the twin's residual, 1.23 capped). A fit's optimum never reads κ², so
+    the first fits are read under the reading that stands, or made again where a decision on the way to them turns
+    between the two (``ptwin.fitting.inflation_range``)."""
     block, base_fit = settings.diagnosis.block, identification.base
-    if twin is not None:
-        measured = _on_twin_residual(prepared, twin, block)
-    else:
-        measured = _on_base_residual(prepared, base_fit, block)
+    # read off the base model's residual, σ is corrected by it (no twin): the fits follow it
+    measured = _on_base_residual(prepared, base_fit, block) if twin is None else None
     if measured is not None:
         prepared, base_fit = measured, None
     candidates, notes = candidate_settings(prepared, settings)
-    if twin is not None and measured is not None:
-        notes += _uncorrected_std(prepared)
-
     iterations = settings.optim.physics_fit.iterations
 
     def fitted_first(prepared: Prepared, fitted: dict[tuple[str, ...], PhysicsFit]) -> FirstFits:
@@ -168,25 +164,24 @@ def diagnose_set(
         first = fitted_first(prepared, {} if base_fit is None else {(): base_fit})
     if base_fit is not None:  # stage 1's, made before: its own range, or none where it was not recorded
         span = span & (identification.base_range or InflationRange(low=math.inf))
-    # Read off the baselines or the twin's residual (σ stays the baselines'), κ² is capped by what the first fits'
-    # residuals show; read off the base model's (no twin), σ was corrected by it and the two stay together.
-    capped = None if measured is not None and twin is None else _capped_by_residuals(prepared, first, block)
-    if capped is not None:
-        inflation = capped.noise.inflation
-        # Where no decision on the way to the first fits turns between the two readings, they are what the cap
-        # would fit again, read under it.
+    if twin is not None:  # off the twin's residual σ stays the baselines' and only κ² changes
+        measured = _on_twin_residual(prepared, twin, block)
+        notes += _uncorrected_std(measured) if measured is not None else []
+    read = measured or prepared
+    # σ corrected by the base model's residual stays together with its κ²: no cap there
+    stands = read if twin is None and measured is not None else _capped_by_residuals(read, first, block) or read
+    if stands is not prepared:
+        inflation = stands.noise.inflation
         reread = span.holds(inflation)
         kept = {s: c.fit.under(inflation) for s, c in first.candidates.items() if c.fit is not None} if reread else {}
-        progress(
-            f"the noise's block inflation is capped at {inflation:.3g} (a model's residual): "
-            f"{READ_UNDER_CAP if reread else FITTED_UNDER_CAP}"
-        )
-        prepared, first = capped, fitted_first(capped, kept)
+        source = "capped by a model's residual" if stands is not read else "off the hybrid twin's residual"
+        progress(f"the noise's block inflation is {inflation:.3g} ({source}): {READ_UNDER if reread else FITTED_UNDER}")
+        prepared, first = stands, fitted_first(stands, kept)
     return diagnose(
         prepared.make_model,
         prepared.samples,
         prepared.split,
-        twin,
+        twin() if twin is not None else None,
         identification.apparent,
         candidates,
         iterations,
@@ -198,12 +193,12 @@ def diagnose_set(
     )
 
 
-def _on_twin_residual(prepared: Prepared, twin: HybridTwin, block: int) -> Prepared | None:
+def _on_twin_residual(prepared: Prepared, twin: Callable[[], HybridTwin], block: int) -> Prepared | None:
     """``prepared`` under the correlation of the twin's residual (``_residual_noise``, a line removed), or None.
     σ stays the baselines': what the twin leaves of a term is slow and reads as correlation (the demo's white
     noise: κ² 1.86, and 9.1 from a twin that stalled), which would correct a second-difference σ upwards
     (``_uncorrected_std`` says where it may read low)."""
-    noise = _residual_noise(prepared, twin.predict, block, 1, RESIDUAL)
+    noise = _residual_noise(prepared, lambda samples: twin().predict(samples), block, 1, RESIDUAL)
     return None if noise is None else _rebuilt(prepared, prepared.fitted, noise)
 
 

@@ -107,12 +107,10 @@ def _diagnosis(settings: Settings, hybrid: bool, output_dir: Path) -> Diagnosis:
 
     prepared = prepare(settings, quiet)
     identification = identify(prepared, settings.optim, quiet, chain=False)
-    twin = None
-    if hybrid:
-        noise = prepared.noise_floor
-        permeability = identification.base.permeability
-        twin = train_twin(prepared, permeability, noise, settings, output_dir, progress=quiet).twin
-    return diagnose_set(prepared, identification, twin, settings, quiet)
+    if not hybrid:
+        return diagnose_set(prepared, identification, None, settings, quiet)
+    twin = train_twin(prepared, identification.base.permeability, prepared.noise_floor, settings, output_dir).twin
+    return diagnose_set(prepared, identification, lambda: twin, settings, quiet)
 
 
 def _row(d: Diagnosis) -> dict:

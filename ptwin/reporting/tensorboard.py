@@ -21,7 +21,8 @@ VALIDATION_EVERY = 5  # LM steps between points of the validation loss curve
 
 
 class TrainingLog:
-    """Logs each LM step of ``train_hybrid`` (pass ``on_step``); losses in units of ``noise`` [N]²."""
+    """Logs each LM step of ``train_hybrid`` (pass ``on_step``) to an event file of its own in ``folder``; losses in
+    units of ``noise`` [N]². ``bar``: a progress bar on a terminal (off where other lines are said meanwhile)."""
 
     def __init__(
         self,
@@ -31,12 +32,13 @@ class TrainingLog:
         val: torch.Tensor,
         noise: float,
         settings: HybridSettings,
+        bar: bool = True,
     ):
         self.writer = SummaryWriter(folder)
         self.samples, self.val, self.noise, self.settings = samples, val, noise, settings
         self.train_size = train.numel()
         total = len(settings.regularisations) * settings.iterations
-        self.bar = tqdm(total=total, desc="hybrid LM", unit="step", disable=None)  # None: only on a terminal
+        self.bar = tqdm(total=total, desc="hybrid LM", unit="step", disable=None if bar else True)  # None: a terminal
 
     def on_step(
         self, lambda_index: int, regularisation: float, step: Step, twin: HybridTwin, solver: LevenbergMarquardt
@@ -61,14 +63,17 @@ class TrainingLog:
 
     def end_training(self) -> None:
         self.bar.close()
-
-    def close(self, images: dict[str, Path], hparams: dict, metrics: dict) -> None:
-        """Add the figures (their saved PNG files as they are: decoding and encoding them again took 0.27 s of
-        the demo's run) and the run's hyperparameters with their metrics, and close the event file."""
-        for name, path in images.items():
-            with Image.open(path) as image:  # reads the header only
-                (width, height), bands = image.size, len(image.getbands())
-            png = Summary.Image(height=height, width=width, colorspace=bands, encoded_image_string=path.read_bytes())
-            self.writer.file_writer.add_summary(Summary(value=[Summary.Value(tag=name, image=png)]))
-        self.writer.add_hparams(hparams, metrics, run_name=".")
         self.writer.close()
+
+
+def write_summary(folder: Path, images: dict[str, Path], hparams: dict, metrics: dict) -> None:
+    """The run's figures (their saved PNG files as they are: decoding and encoding them again took 0.27 s of the
+    demo's run) and its hyperparameters with their metrics, in an event file of their own in ``folder``."""
+    writer = SummaryWriter(folder)
+    for name, path in images.items():
+        with Image.open(path) as image:  # reads the header only
+            (width, height), bands = image.size, len(image.getbands())
+        png = Summary.Image(height=height, width=width, colorspace=bands, encoded_image_string=path.read_bytes())
+        writer.file_writer.add_summary(Summary(value=[Summary.Value(tag=name, image=png)]))
+    writer.add_hparams(hparams, metrics, run_name=".")
+    writer.close()
