@@ -1243,6 +1243,16 @@ def test_clean_data_every_stage_finds_k_and_nothing_else(clean_run):
         "fig4_apparent_permeability_depth.png",
     ):
         assert (output / name).is_file(), name
+    # stages 1–3's figures drawn aside, fig5 after the diagnosis, and the paper's in its order all the same
+    assert [name for name in outcome.figures if name.startswith("fig")] == [
+        "fig3_curves_base_model",
+        "fig4_apparent_permeability_depth",
+        "fig5_permeability_speed",
+        "fig6_viscosity_per_speed",
+        "fig7_hybrid_fit",
+        "fig8_error_vs_network",
+        "fig9_residuals",
+    ]
     events = EventAccumulator(str(output / "tensorboard"), size_guidance={"images": 0}).Reload()
     (image,) = events.Images("fig4_apparent_permeability_depth")
     png = (output / "fig4_apparent_permeability_depth.png").read_bytes()

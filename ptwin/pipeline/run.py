@@ -6,6 +6,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -86,22 +87,26 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     samples, split = prepared.samples, prepared.split
     identification = identify(prepared, settings.optim, progress)
     noise = prepared.noise_floor
-    with TwinAside(prepared, identification.base.permeability, noise, settings, output_dir, progress) as aside:
+
+    draw = partial(_stage_figures, output_dir, prepared, identification) if settings.figures else None
+    twin_aside = TwinAside(prepared, identification.base.permeability, noise, settings, output_dir, progress, draw)
+    with twin_aside as aside:
         diagnosis = diagnose_set(prepared, identification, aside.twin, settings, progress)
         outcome = aside.outcome()
-    figures = {}
-    if settings.figures:
-        figures = save_figures(
-            output_dir,
-            samples,
-            split,
-            identification,
-            outcome.twin,
-            diagnosis,
-            _corrected_per_curve(prepared, diagnosis, settings.optim.physics_fit.iterations),
-            prepared.rate,
-            progress,
-        )
+        figures = {}
+        if settings.figures:
+            figures = save_figures(
+                output_dir,
+                samples,
+                split,
+                identification,
+                outcome.twin,
+                diagnosis,
+                _corrected_per_curve(prepared, diagnosis, settings.optim.physics_fit.iterations),
+                prepared.rate,
+                progress,
+                drawn=aside.drawn,
+            )
     results = _results(prepared, identification, settings)
     results["stages"]["hybrid"] = hybrid_stage(outcome, samples, split, settings.optim.hybrid)
     results["noise_floor"] = noise
@@ -121,6 +126,14 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
     progress(f"results in {output_dir} ({results['seconds']:.1f} s)")
     tried = {term: _alone(diagnosis, term) for term in VOCABULARY if any(term in key for key in diagnosis.candidates)}
     return RunResult(results, payload, figures, tried, diagnosis.permeability["base"], diagnosis.alone)
+
+
+def _stage_figures(
+    output_dir: Path, prepared: Prepared, identification: Identification, twin: HybridTwin, say: Callable[[str], None]
+) -> dict:
+    """The figures of stages 1–3, which the diagnosis does not change: drawn aside beside it (``TwinAside``)."""
+    samples, split, rate = prepared.samples, prepared.split, prepared.rate
+    return save_figures(output_dir, samples, split, identification, twin, None, None, rate, say)
 
 
 def _alone(diagnosis: Diagnosis, term: str) -> dict[str, float] | None:

@@ -53,9 +53,11 @@ def _twin_maker(prepared: Prepared, permeability: float, noise: float) -> Callab
 class TwinAside:
     """``train_twin`` aside (``ptwin.aside``), its LM steps logged to TensorBoard (``output_dir/tensorboard``) where
     it trains; ``outcome()`` waits for it. The twin comes back as its parameters and is rebuilt here from the same
-    start, so it predicts what the trained one did, bit for bit. A progress bar only where nothing else is said
-    meanwhile: where the twin trains here, when first asked for. Leave it as a context manager: a twin still
-    training when the caller fails is stopped."""
+    start, so it predicts what the trained one did, bit for bit. ``draw``: figures of the trained twin (twin →
+    {name: figure}, its lines said through the progress it is given), drawn aside too once the twin is here, while
+    the caller goes on; ``drawn()`` waits for them. A progress bar only where nothing else is said meanwhile: where
+    the twin trains here, when first asked for. Leave it as a context manager: work aside that is still going when
+    the caller fails is stopped."""
 
     def __init__(
         self,
@@ -65,12 +67,14 @@ class TwinAside:
         settings: Settings,
         output_dir: Path,
         progress: Callable[[str], None] = print,
+        draw: Callable[[HybridTwin, Callable[[str], None]], dict] | None = None,
     ):
         forked = can_fork()
         aside = " (aside, while the diagnosis fits what does not need it)" if forked else ""
         progress(f"stage 3: the hybrid twin (K learnable + MLP of the model error), LM over the λ grid{aside}")
         samples, split = prepared.samples, prepared.split
         self._make_twin, self._outcome = _twin_maker(prepared, permeability, noise), None
+        self._draw, self._drawing, self._forked, self._progress = draw, None, forked, progress
 
         def trained() -> tuple[dict, dict]:
             hybrid = settings.optim.hybrid
@@ -90,13 +94,33 @@ class TwinAside:
             twin = self._make_twin()
             twin.load_state_dict(state)
             self._outcome = HybridOutcome(twin=twin, **rest)
+            if self._draw is not None:
+                self._drawing = Aside(lambda: _said(lambda say: self._draw(twin, say)), fork=self._forked)
         return self._outcome
 
     def twin(self) -> HybridTwin:
         return self.outcome().twin
 
+    def drawn(self) -> dict:
+        """What ``draw`` drew of the trained twin ({} without ``draw``), its lines said now."""
+        self.outcome()
+        if self._drawing is None:
+            return {}
+        figures, lines = self._drawing.result()
+        for line in lines:
+            self._progress(line)
+        return figures
+
     def __enter__(self) -> TwinAside:
         return self
 
     def __exit__(self, *exc) -> None:
-        self._aside.__exit__(*exc)
+        for aside in (self._aside, self._drawing):
+            if aside is not None:
+                aside.__exit__(*exc)
+
+
+def _said(work: Callable[[Callable[[str], None]], dict]) -> tuple[dict, list[str]]:
+    """(what ``work`` returns, the lines it said): a child's lines are said by its parent."""
+    lines = []
+    return work(lines.append), lines

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib
@@ -89,14 +90,26 @@ def figure_file(output_dir: Path, name: str) -> Path:
 
 
 def save_figures(
-    output_dir: Path, samples, split, identification, twin, diagnosis, corrected_per_curve, rate=None, progress=print
+    output_dir: Path,
+    samples,
+    split,
+    identification,
+    twin,
+    diagnosis,
+    corrected_per_curve,
+    rate=None,
+    progress=print,
+    drawn: Callable[[], dict] | None = None,
 ):
-    """Write every figure as PNG into ``output_dir``; returns {name: figure} for TensorBoard.
+    """Write the figures as PNG into ``output_dir``; returns {name: figure} for TensorBoard, the paper's by number
+    first.
 
     ``identification``: stages 1–2 (``base``, ``apparent``, ``viscous_per_curve``); ``twin``: the hybrid
-    twin; ``corrected_per_curve``: K per curve of the corrected model, or None; ``rate``: the rate effect
-    before any model (``ptwin.data.evidence.RateEffect``), or None. A figure matplotlib cannot draw from
-    these data is left out with one line saying so.
+    twin; ``diagnosis``: the diagnosis, or None for the figures of stages 1–3 alone (the paper's 3, 4 and 6–9, the
+    rate effect), which need none, so a run draws them aside beside it; ``drawn``: those, drawn so, asked for once
+    the rest are drawn and taken as they are; ``corrected_per_curve``: K per curve of the corrected model, or None;
+    ``rate``: the rate effect before any model (``ptwin.data.evidence.RateEffect``), or None. A figure matplotlib
+    cannot draw from these data is left out with one line saying so.
     """
     base, apparent = identification.base, identification.apparent
     with torch.no_grad():  # evaluated where the models live, plotted from the CPU
@@ -106,12 +119,11 @@ def save_figures(
     samples = samples.to("cpu")
     split = Split(*(part.cpu() for part in (split.train, split.val, split.test)))
     index = torch.cat([split.train, split.val, split.test]).sort().values
-    builders = {
+    stages = {
         "fig3_curves_base_model": lambda: _per_speed(
             samples, index, {"elastic + Darcy": base_force}, "force [nN]", "Measured curves and the base model"
         ),
         "fig4_apparent_permeability_depth": lambda: _apparent_against_depth(samples, index, apparent),
-        "fig5_permeability_speed": lambda: _permeability_against_speed(apparent, base, corrected_per_curve),
         "fig6_viscosity_per_speed": lambda: _viscous_per_speed(
             apparent, identification.viscous_per_curve, identification.viscous_term
         ),
@@ -129,14 +141,23 @@ def save_figures(
         ),
     }
     if rate is not None:
-        builders["rate_effect"] = lambda: _rate_effect(rate)
+        stages["rate_effect"] = lambda: _rate_effect(rate)
+    if diagnosis is None:
+        return _drawn(output_dir, stages, progress)
+    builders = {"fig5_permeability_speed": lambda: _permeability_against_speed(apparent, base, corrected_per_curve)}
     if bool((samples.in_contact & ((samples.segment == HOLD) | (samples.segment == CREEP))).any()):
-        series = {"base": base_force, **({"corrected": corrected} if corrected is not None else {})}
+        series = {"base": base_force, "corrected": corrected}
         builders["holds_force_time"] = lambda: _holds(samples, series)
-    if diagnosis is not None:
-        builders.update(_diagnosis_figures(samples, index, base_force, correction, corrected, diagnosis.chosen))
-        for number, prediction in enumerate(diagnosis.predictions, start=1):
-            builders[f"next_experiment_{number}"] = lambda prediction=prediction: _proposal(prediction)
+    builders.update(_diagnosis_figures(samples, index, base_force, correction, corrected, diagnosis.chosen))
+    for number, prediction in enumerate(diagnosis.predictions, start=1):
+        builders[f"next_experiment_{number}"] = lambda prediction=prediction: _proposal(prediction)
+    rest = _drawn(output_dir, builders, progress)
+    figures = {**(_drawn(output_dir, stages, progress) if drawn is None else drawn()), **rest}
+    return dict(sorted(figures.items(), key=_paper_number))
+
+
+def _drawn(output_dir: Path, builders: dict, progress) -> dict:
+    """Each builder's figure, saved as PNG into ``output_dir``; one that matplotlib cannot draw is said in a line."""
     figures = {}
     for name, build in builders.items():
         try:
@@ -149,6 +170,12 @@ def save_figures(
         plt.close(figure)
         figures[name] = figure
     return figures
+
+
+def _paper_number(item: tuple[str, object]) -> tuple[int, int]:
+    """The paper's figures by their number, the others after them in the order they came (a stable sort)."""
+    number = re.match(r"fig(\d+)_", item[0])
+    return (0, int(number[1])) if number else (1, 0)
 
 
 def _rate_effect(rate):
@@ -229,7 +256,7 @@ def _speed_axis(ax, speeds) -> None:
     ax.set_xscale("log")
     measured = sorted({float(speed) for speed in speeds if np.isfinite(speed) and speed > 0})
     ax.xaxis.set_major_locator(matplotlib.ticker.FixedLocator(measured))
-    ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda speed, _: f"{speed:g}"))
+    ax.xaxis.set_major_formatter(matplotlib.ticker.StrMethodFormatter("{x:g}"))
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("base speed [µm/s]")
 
