@@ -86,16 +86,16 @@ class Aside(Generic[T]):
 def _serve(function: Callable[[], T], sending) -> None:
     """In the child: (True, the value) or (False, the exception) sent back pickled."""
     try:
-        outcome = (True, function())
+        done, value = True, function()
     except BaseException as error:  # everything goes back to the caller, who raises it as its own
         error.add_note(f"in the process working aside:\n{traceback.format_exc()}")
-        outcome = (False, error)
+        done, value = False, error
     try:
-        message = pickle.dumps(outcome)
-    except Exception as error:  # what does not pickle comes back in words
-        what = "its result" if outcome[0] else f"{type(outcome[1]).__name__} ({outcome[1]})"
-        message = pickle.dumps(
-            (False, RuntimeError(f"the work done aside raised or returned {what}, which did not pickle: {error}"))
-        )
+        message = pickle.dumps((done, value))
+        if not done:  # an exception whose __init__ takes other arguments than it keeps does not come back
+            pickle.loads(message)
+    except Exception as error:  # what does not come back as itself comes back in words
+        what = "its result" if done else f"{type(value).__name__} ({value})"
+        message = pickle.dumps((False, RuntimeError(f"the work done aside gave {what}, which did not pickle: {error}")))
     sending.send_bytes(message)
     sending.close()

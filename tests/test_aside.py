@@ -41,6 +41,19 @@ def test_an_exception_in_the_child_is_raised_in_the_caller_with_the_childs_trace
     assert any("in the process working aside" in note and "fails" in note for note in raised.value.__notes__)
 
 
+class Located(ValueError):
+    def __init__(self, message: str, point: int):
+        super().__init__(f"{message} at point {point}")
+
+
+def test_an_exception_that_does_not_pickle_back_comes_back_in_words(forking):
+    def fails():
+        raise Located("off the grid", 7)
+
+    with Aside(fails) as aside, pytest.raises(RuntimeError, match=r"Located \(off the grid at point 7\)"):
+        aside.result()
+
+
 def test_a_child_that_dies_without_an_answer_is_said_so(forking):
     with Aside(lambda: os._exit(3)) as aside, pytest.raises(RuntimeError, match="ended with exit code 3"):
         aside.result()
