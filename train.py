@@ -19,7 +19,6 @@ from omegaconf import DictConfig
 
 from ptwin.app import freeze_imports, one_line_errors, register, typed
 from ptwin.pipeline.run import run
-from ptwin.threads import one_thread_for_good
 
 register()
 freeze_imports()
@@ -28,7 +27,6 @@ freeze_imports()
 @hydra.main(version_base="1.3", config_path="configs", config_name="train")
 def main(cfg: DictConfig) -> None:
     output_dir = Path(HydraConfig.get().runtime.output_dir)
-    one_thread_for_good()  # and so the hybrid twin trains aside, forked (ptwin.aside)
     with one_line_errors(output_dir):
         run(typed(cfg), output_dir)
 

@@ -55,7 +55,6 @@ from ptwin.data.recordings import write_recordings
 from ptwin.pipeline.run import run
 from ptwin.synth.presets import SOFT_CANTILEVER
 from ptwin.synth.simulator import Experiment, Hold, simulate
-from ptwin.threads import one_thread_for_good
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -397,7 +396,6 @@ def main() -> None:
     parser.add_argument("--pgd", default="default", help="PGD preset")
     parser.add_argument("--only", nargs="*", help="run only the cases whose name contains one of these")
     args = parser.parse_args()
-    one_thread_for_good()  # as train.py runs: each set's hybrid twin trains aside, forked (ptwin.aside)
     warnings.filterwarnings("ignore", category=RuntimeWarning)
     register()
     cache = os.environ.get("PTWIN_CACHE", str(ROOT / ".cache" / "ptwin"))

@@ -2,37 +2,44 @@
 first asked for.
 
 Why: ptwin's numerics run on one thread (``ptwin.threads``), so a run on one set leaves the second core of a
-2-core machine idle, and two stages that do not depend on each other can share the cores: the hybrid twin trains
-while the diagnosis fits its first candidates (``ptwin.pipeline.run``). A thread would share the interpreter's
+2-core machine idle, and work that does not depend on the caller's can take it: the hybrid twin trains while the
+diagnosis fits its first candidates (``ptwin.pipeline.run``), a basis's coarse Richardson mesh is solved beside
+its fine one (``ptwin.pgd.build``). A thread would share the interpreter's
 lock with the caller (the demo's two stages in 2.0 s on two threads, 1.3 s forked, 2.5 s one after the other).
 A fork, not a pool: the child starts with everything the caller holds (torch imported, the samples prepared),
 nothing pickled on the way in; the result comes back pickled through a pipe (plain ``pickle``: torch's own
 reductions for processes would share tensors through file descriptors that end with the child).
 
-A fork is safe only in a process that never ran numerics on more than one thread (``ptwin.threads``'
-``one_thread_for_good``, which the faces call first thing), on Linux (macOS' system libraries refuse a forked
-child), and outside a daemonic process (a Dask worker), which may have no children. Anywhere else the function
-runs in the caller when its result is first asked for: the same result, later.
+It forks only from within one thread (``ptwin.threads.one_thread``), which the child keeps: an OpenMP team of
+more than one thread, opened in a child forked from a process that had run one, waits forever on a barrier for
+threads that live only in the parent (libgomp is not fork-safe: a twin forked outside one thread, in a test process
+that had run on two, hung so in MKL's log10). And only where a second core is there to take the work, on Linux
+(macOS' system libraries refuse a forked child), outside a daemonic process (a Dask worker), which may have no
+children. Anywhere else the function runs in the caller when its result is first asked for: the same result, later.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import pickle
 import sys
 import traceback
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
-from ptwin.threads import on_one_thread_for_good
+from ptwin.threads import on_one_thread
 
 T = TypeVar("T")
 
 
 def can_fork() -> bool:
     """Whether ``Aside`` runs its function in a child here, rather than in the caller when asked."""
-    linux = sys.platform.startswith("linux")
-    return linux and on_one_thread_for_good() and not multiprocessing.current_process().daemon
+    linux, cores = (
+        sys.platform.startswith("linux"),
+        len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1,
+    )
+    return linux and cores > 1 and on_one_thread() and not multiprocessing.current_process().daemon
 
 
 class Aside(Generic[T]):

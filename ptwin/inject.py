@@ -21,7 +21,6 @@ from omegaconf import DictConfig
 from ptwin.app import freeze_imports, one_line_errors, register, typed
 from ptwin.pipeline.inject import detection, detection_limits
 from ptwin.pipeline.settings import EVERY_TERM
-from ptwin.threads import one_thread_for_good
 
 register()
 freeze_imports()
@@ -30,7 +29,6 @@ freeze_imports()
 @hydra.main(version_base="1.3", config_path="../configs", config_name="inject")
 def main(cfg: DictConfig) -> None:
     output_dir = Path(HydraConfig.get().runtime.output_dir)
-    one_thread_for_good()  # and so each run's hybrid twin trains aside, forked (ptwin.aside)
     with one_line_errors(output_dir):
         settings = typed(cfg)
         (detection_limits if settings.inject.term == EVERY_TERM else detection)(settings, output_dir)

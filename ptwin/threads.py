@@ -15,8 +15,6 @@ from contextlib import contextmanager
 import threadpoolctl
 import torch
 
-_FOR_GOOD = False  # ``one_thread_for_good`` was called: no OpenMP team of more than one thread runs in this process
-
 
 @contextmanager
 def one_thread() -> Iterator[None]:
@@ -30,17 +28,6 @@ def one_thread() -> Iterator[None]:
         torch.set_num_threads(threads)
 
 
-def one_thread_for_good() -> None:
-    """torch and the BLAS under numpy on one thread from now on, for the rest of the process: a face calls it first
-    thing, before any numerics. Then a child it forks (``ptwin.aside``) finds no OpenMP team of its parent's threads:
-    libgomp is not fork-safe once a team of more than one thread has run (a twin forked in a test process that had
-    run on two threads hung in MKL's log10, at a barrier waiting for threads that live only in the parent)."""
-    global _FOR_GOOD
-    torch.set_num_threads(1)
-    threadpoolctl.threadpool_limits(limits=1)
-    _FOR_GOOD = True
-
-
-def on_one_thread_for_good() -> bool:
-    """Whether this process called ``one_thread_for_good``."""
-    return _FOR_GOOD
+def on_one_thread() -> bool:
+    """Whether torch runs on one thread here (within ``one_thread``): then no OpenMP team of more threads opens."""
+    return torch.get_num_threads() == 1

@@ -123,6 +123,15 @@ def run(folder, cache, output, *overrides, figures: bool = False, progress=lambd
     return run_pipeline(settings, output, progress=progress)
 
 
+@pytest.fixture
+def two_threads():
+    """torch on two threads within the test, the count before given back after."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    yield
+    torch.set_num_threads(before)
+
+
 @pytest.fixture(scope="session")
 def default_set(tmp_path_factory) -> Path:
     """``simulated_set`` as it comes (nothing concealed), simulated once a worker (2 s): its readers read it and

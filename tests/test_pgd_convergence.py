@@ -77,7 +77,8 @@ def test_the_richardson_mesh_solved_in_a_second_process_gives_the_basis_of_one_p
 
     config = small_config(richardson=True)
     beside = build.build_basis(config, progress=lambda line: None)
-    monkeypatch.setattr(build, "_may_fork", lambda: False)
+    assert beside.stats["meshes_side_by_side"]
+    monkeypatch.setattr(build, "can_fork", lambda: False)
     alone = build.build_basis(config, progress=lambda line: None)
     assert beside.stats["modes_per_mesh"] == alone.stats["modes_per_mesh"]
     assert len(alone.stats["modes_per_mesh"]) == 2

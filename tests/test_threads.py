@@ -15,14 +15,6 @@ def counts() -> tuple[int, set[int]]:
     return torch.get_num_threads(), {pool["num_threads"] for pool in threadpoolctl.threadpool_info()}
 
 
-@pytest.fixture
-def two_threads():
-    before = torch.get_num_threads()
-    torch.set_num_threads(2)
-    yield
-    torch.set_num_threads(before)
-
-
 def test_within_one_thread_and_the_callers_after(two_threads):
     with one_thread():
         assert counts() == (1, {1})

@@ -180,30 +180,33 @@ def test_the_basis_command_builds_where_train_py_looks(tmp_path):
     assert lines == [f"reusing PGD basis {cache_path(config, tmp_path)}"]
 
 
-def test_train_py_trains_the_twin_aside_and_finds_what_one_process_finds_bit_for_bit(tmp_path, coarse_cache):
-    # train.py runs on one thread for good, so its twin trains in a forked child while the diagnosis fits the base
-    # model and each term, and the figures of stages 1–3 are drawn in another while the diagnosis goes on
-    # (``ptwin.aside``); in this test process, which ran on more threads, all of it is done in the caller. The short
-    # baselines of the simulated set make the diagnosis read the noise off the twin's residual.
+def test_train_py_trains_the_twin_aside_and_finds_what_one_process_finds_bit_for_bit(
+    tmp_path, coarse_cache, monkeypatch
+):
+    # train.py trains its twin in a forked child while the diagnosis fits the base model and each term, and draws
+    # the figures of stages 1–3 in another while the diagnosis goes on (``ptwin.aside``); here, with forks refused,
+    # all of it is done in this process. The short baselines of the simulated set make the diagnosis read the noise
+    # off the twin's residual.
     import json
 
-    from ptwin.aside import can_fork
+    import ptwin.pipeline.twin
     from ptwin.data.noise import RESIDUAL
     from tests.conftest import run, simulated_set
 
     folder = simulated_set(tmp_path / "set", base_speeds=(0.5e-6, 8e-6, 80e-6), samples=400)
     overrides = ("optim.hybrid.regularisations=[1.0e-2,1.0]", "optim.hybrid.iterations=12", "diagnosis.design=false")
-    here = run(folder, coarse_cache, tmp_path / "here", *overrides, figures=True)
-    assert here.diagnosis["noise"]["source"].startswith(RESIDUAL)
-    assert not can_fork()
     result = run_train(tmp_path, f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}", *overrides)
     assert result.returncode == 0, result.stderr[-2000:]
     assert "LM over the λ grid (aside, while the diagnosis fits what does not need it)" in result.stdout
+    monkeypatch.setattr(ptwin.pipeline.twin, "can_fork", lambda: False)
+    lines = []
+    here = run(folder, coarse_cache, tmp_path / "here", *overrides, figures=True, progress=lines.append)
+    assert not any("(aside," in line for line in lines)
+    assert here.diagnosis["noise"]["source"].startswith(RESIDUAL)
     aside = tmp_path / "run"
     assert json.loads((aside / "diagnosis.json").read_text()) == here.diagnosis
     assert json.loads((aside / "results.json").read_text())["stages"]["hybrid"] == here.results["stages"]["hybrid"]
-    assert (aside / "report.md").read_text().replace(str(aside), "") == (
-        tmp_path / "here" / "report.md"
-    ).read_text().replace(str(tmp_path / "here"), "")
+    report = (tmp_path / "here" / "report.md").read_text().replace(str(tmp_path / "here"), str(aside))
+    assert (aside / "report.md").read_text() == report
     for name in here.figures:
         assert (aside / f"{name}.png").read_bytes() == (tmp_path / "here" / f"{name}.png").read_bytes(), name

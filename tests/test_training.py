@@ -54,23 +54,26 @@ def test_same_seed_same_result_and_a_killed_run_resumes_to_it(tmp_path, coarse_c
 
 
 def test_the_twin_trained_aside_is_the_twin_trained_here_bit_for_bit(tmp_path, coarse_cache):
-    # In a run on one set the twin trains in a forked child and comes back as its parameters, rebuilt from the
-    # same start (``TwinAside``); where no fork is safe it trains here when first asked for.
+    # Within one thread, as a run is, the twin trains in a forked child and comes back as its parameters, rebuilt
+    # from the same start (``TwinAside``).
     from ptwin.aside import can_fork
     from ptwin.pipeline.identify import identify
     from ptwin.pipeline.prepare import prepare
     from ptwin.pipeline.twin import TwinAside, train_twin
+    from ptwin.threads import one_thread
 
     folder = simulated_set(tmp_path / "set", base_speeds=(0.5e-6, 8e-6, 80e-6), samples=400)
     settings = settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}", *quick()[1:])
-    p = prepare(settings, progress=lambda line: None)
-    permeability = identify(p, settings.optim, progress=lambda line: None, chain=False).base.permeability
-    here = train_twin(p, permeability, p.noise_floor, settings, tmp_path / "here")
-    lines = []
-    with TwinAside(p, permeability, p.noise_floor, settings, tmp_path / "aside", lines.append) as aside:
-        assert aside._aside.forked == can_fork()
-        outcome = aside.outcome()
-    assert ("aside" in lines[0]) == can_fork()
+    with one_thread():
+        p = prepare(settings, progress=lambda line: None)
+        permeability = identify(p, settings.optim, progress=lambda line: None, chain=False).base.permeability
+        here = train_twin(p, permeability, p.noise_floor, settings, tmp_path / "here")
+        lines = []
+        forked = can_fork()
+        with TwinAside(p, permeability, p.noise_floor, settings, tmp_path / "aside", lines.append) as aside:
+            assert aside._aside.forked == forked
+            outcome = aside.outcome()
+    assert ("(aside," in lines[0]) == forked
     assert (outcome.val_rmse, outcome.iterations, outcome.regularisation) == (
         here.val_rmse,
         here.iterations,

@@ -2,18 +2,16 @@
 
 from __future__ import annotations
 
-import multiprocessing
-import os
 import resource
-import sys
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
-from contextlib import contextmanager, nullcontext
+from contextlib import nullcontext
+from functools import partial
 from pathlib import Path
 
 import torch
 
+from ptwin.aside import Aside, can_fork
 from ptwin.pgd.basis import Basis
 from ptwin.pgd.compression import force_amplitudes, force_modes, recompress
 from ptwin.pgd.config import PGDConfig
@@ -26,8 +24,10 @@ def build_basis(config: PGDConfig, progress: Callable[[str], None] = print) -> B
     """Greedy PGD on the configured mesh (and, with ``richardson``, on the mesh with
     half the rings), then Richardson-combine and recompress the force.
 
-    The pressure field stored is the fine mesh's; the force is the extrapolated one. Where a second core is free
-    (``_may_fork``) the coarse mesh is solved in a forked process beside the fine one, to the same bits.
+    The pressure field stored is the fine mesh's; the force is the extrapolated one. The two meshes are independent
+    problems, each solved on one thread: where a second core is free the coarse mesh is solved beside the fine one
+    (``ptwin.aside``), to the same bits, and the build takes the fine mesh's time (pgd=default 1.8–3.0 s against
+    3.6–4.8 s one after the other here).
     """
     with one_thread():
         return _build(config, progress)
@@ -38,13 +38,15 @@ def _build(config: PGDConfig, progress: Callable[[str], None]) -> Basis:
     start, cpu = time.perf_counter(), time.process_time()
     levels = [config.plane.rings] + ([config.plane.rings // 2] if config.richardson else [])
     weights = [1.0] if not config.richardson else _richardson_weights(config.richardson_order)
-    beside = len(levels) > 1 and _may_fork()
+    beside = len(levels) > 1 and can_fork()
     peak, cpu_beside = 0, 0.0  # the coarse mesh's own process's, where it had one
-    with _forked(_coarse_force, config, levels[1]) if beside else nullcontext() as forked:
+    with Aside(partial(_measured, _coarse_force, config, levels[1])) if beside else nullcontext() as forked:
         problem, solution = _solved(config, levels[0], progress)
         forces = [force_modes(solution, problem.dims)]
         if len(levels) > 1:
-            (beta, factors), peak, cpu_beside = forked() if beside else (_coarse_force(config, levels[1]), 0, 0.0)
+            (beta, factors), peak, cpu_beside = (
+                forked.result() if beside else (_coarse_force(config, levels[1]), 0, 0.0)
+            )
             forces.append((beta, factors))
             progress(f"the Richardson mesh ({levels[1]} rings): {beta.numel()} modes")
     betas = [weight * beta for weight, (beta, _) in zip(weights, forces)]
@@ -80,32 +82,9 @@ def _coarse_force(config: PGDConfig, rings: int):
         return force_modes(solution, problem.dims)
 
 
-@contextmanager
-def _forked(function: Callable, *args):
-    """``function(*args)`` started in a forked process while the block runs: the value is the call that waits for
-    (its result, the peak memory [B] and the CPU seconds of that process). The two meshes of a Richardson build are
-    independent problems, each solved on one thread: on a second core the build takes the fine mesh's time, to the
-    same bits (pgd=default 1.8–3.0 s against 3.6–4.8 s one after the other here). ``_may_fork`` says where a build
-    does this."""
-    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork")) as pool:
-        future = pool.submit(_measured, function, *args)
-        yield future.result
-
-
 def _measured(function: Callable, *args):
     """(``function(*args)``, the peak memory [B] and the CPU seconds of this process): a forked process's share."""
     return function(*args), _peak_memory(), time.process_time()
-
-
-def _may_fork() -> bool:
-    """Whether a second core is free for the coarse mesh and this process may fork: not with one core, nor where
-    ``fork`` is not there, nor in a daemonic process (a Dask worker building the basis may have no children)."""
-    return (
-        "fork" in multiprocessing.get_all_start_methods()
-        and sys.platform.startswith("linux")
-        and len(os.sched_getaffinity(0)) > 1
-        and not multiprocessing.current_process().daemon
-    )
 
 
 def _peak_memory() -> int:
