@@ -4,11 +4,11 @@ first asked for.
 Why: ptwin's numerics run on one thread (``ptwin.threads``), so a run on one set leaves the second core of a
 2-core machine idle, and work that does not depend on the caller's can take it: the hybrid twin trains while the
 diagnosis fits its first candidates (``ptwin.pipeline.run``), a basis's coarse Richardson mesh is solved beside
-its fine one (``ptwin.pgd.build``). A thread would share the interpreter's
-lock with the caller (the demo's two stages in 2.0 s on two threads, 1.3 s forked, 2.5 s one after the other).
-A fork, not a pool: the child starts with everything the caller holds (torch imported, the samples prepared),
-nothing pickled on the way in; the result comes back pickled through a pipe (plain ``pickle``: torch's own
-reductions for processes would share tensors through file descriptors that end with the child).
+its fine one (``ptwin.pgd.build``). A thread would share the interpreter's lock with the caller (the demo's twin
+and first fits in 2.0 s on two threads, 1.3 s forked, 2.5 s one after the other). A fork, not a pool: the child
+starts with everything the caller holds (torch imported, the samples prepared), nothing pickled on the way in; the
+result comes back pickled through a pipe (plain ``pickle``: torch's own reductions for processes would share
+tensors through file descriptors that end with the child).
 
 It forks only from within one thread (``ptwin.threads.one_thread``), which the child keeps: an OpenMP team of
 more than one thread, opened in a child forked from a process that had run one, waits forever on a barrier for
@@ -35,11 +35,12 @@ T = TypeVar("T")
 
 def can_fork() -> bool:
     """Whether ``Aside`` runs its function in a child here, rather than in the caller when asked."""
-    linux, cores = (
-        sys.platform.startswith("linux"),
-        len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1,
+    return (
+        sys.platform.startswith("linux")
+        and len(os.sched_getaffinity(0)) > 1
+        and on_one_thread()
+        and not multiprocessing.current_process().daemon
     )
-    return linux and cores > 1 and on_one_thread() and not multiprocessing.current_process().daemon
 
 
 class Aside(Generic[T]):
