@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import asdict, fields
+from functools import partial
 from pathlib import Path
 
 from ptwin.aside import Aside, can_fork
@@ -95,7 +96,7 @@ class TwinAside:
             twin.load_state_dict(state)
             self._outcome = HybridOutcome(twin=twin, **rest)
             if self._draw is not None:
-                self._drawing = Aside(lambda: _said(lambda say: self._draw(twin, say)), fork=self._forked)
+                self._drawing = Aside(partial(_said, partial(self._draw, twin)), fork=self._forked)
         return self._outcome
 
     def twin(self) -> HybridTwin:
