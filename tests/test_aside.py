@@ -94,3 +94,20 @@ def test_without_a_fork_the_function_runs_in_the_caller_once_when_first_asked_fo
     assert not aside.forked and calls == []
     assert aside.result() == 1 and aside.result() == 1
     assert calls == [os.getpid()]
+
+
+def test_a_child_forked_within_one_thread_runs_torch_after_its_parent_ran_on_two(two_threads):
+    # libgomp is not fork-safe: forked on two threads from a process that had run a team of two, a child's log10
+    # (MKL's, threaded) waits forever at a barrier for threads that live only in the parent (tried: still waiting
+    # after 20 s); forked within one thread it runs. can_fork refuses the first.
+    values = torch.rand(4_000_000, dtype=torch.float64, generator=torch.Generator().manual_seed(0)) + 1.0
+    values.log10()  # a team of two threads
+    assert not can_fork()
+    with one_thread():
+        if not can_fork():
+            pytest.skip("no fork here (not Linux, or one core)")
+        expected = values.log10().sum().item()
+        with Aside(lambda: values.log10().sum().item()) as aside:
+            aside._child.join(timeout=60)
+            assert not aside._child.is_alive(), "the child hangs"
+            assert aside.result() == expected
