@@ -10,12 +10,15 @@ starts with everything the caller holds (torch imported, the samples prepared), 
 result comes back pickled through a pipe (plain ``pickle``: torch's own reductions for processes would share
 tensors through file descriptors that end with the child).
 
-It forks only from within one thread (``ptwin.threads.one_thread``), which the child keeps: an OpenMP team of
-more than one thread, opened in a child forked from a process that had run one, waits forever on a barrier for
-threads that live only in the parent (libgomp is not fork-safe: a twin forked outside one thread, in a test process
-that had run on two, hung so in MKL's log10). And only where a second core is there to take the work, on Linux
-(macOS' system libraries refuse a forked child), outside a daemonic process (a Dask worker), which may have no
-children. Anywhere else the function runs in the caller when its result is first asked for: the same result, later.
+It forks only from within one thread (``ptwin.threads.one_thread``), which the child keeps: an OpenMP team of more
+than one thread, opened in a child forked from a process that had run one, waits forever on a barrier for threads
+that live only in the parent (libgomp is not fork-safe: a twin forked outside one thread, in a test process that had
+run on two, hung so in MKL's log10). And only where a second core is there to take the work, on Linux (macOS' system
+libraries refuse a forked child), outside a daemonic process (a Dask worker), which may have no children, and where
+torch sees no accelerator: with a GPU in the machine, autograd's engine starts a thread for it at the first backward
+pass, even with ``device=cpu``, and a child forked after that refuses a backward pass of its own (``train.py`` on a
+machine with a GPU failed so), nor could it use CUDA again. Anywhere else the function runs in the caller when its
+result is first asked for: the same result, later.
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ import sys
 import traceback
 from collections.abc import Callable
 from typing import Generic, TypeVar
+
+import torch
 
 from ptwin.threads import on_one_thread
 
@@ -40,6 +45,7 @@ def can_fork() -> bool:
         and len(os.sched_getaffinity(0)) > 1
         and on_one_thread()
         and not multiprocessing.current_process().daemon
+        and torch.accelerator.device_count() == 0
     )
 
 

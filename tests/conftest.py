@@ -6,6 +6,7 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from ptwin.app import register, typed
+from ptwin.aside import can_fork
 from ptwin.data.recordings import write_recordings
 from ptwin.pgd.build import build_basis
 from ptwin.pgd.cache import cached_basis
@@ -14,6 +15,7 @@ from ptwin.pipeline.run import RunResult
 from ptwin.pipeline.run import run as run_pipeline
 from ptwin.pipeline.settings import Settings
 from ptwin.synth.simulator import Experiment, simulate
+from ptwin.threads import one_thread
 
 if os.environ.get("PYTEST_XDIST_WORKER"):
     # Workers share the machine's cores: one thread each, or two workers oversubscribe two cores.
@@ -121,6 +123,18 @@ def run(folder, cache, output, *overrides, figures: bool = False, progress=lambd
         f"data.path={folder}", "pgd=coarse", f"cache_dir={cache}", f"figures={str(figures).lower()}", *overrides
     )
     return run_pipeline(settings, output, progress=progress)
+
+
+NO_FORK = "no fork here (not Linux, one core, or an accelerator in the machine): the work aside runs in the caller"
+
+
+@pytest.fixture
+def forking():
+    """Within one thread, where ``ptwin.aside`` forks (skipped where it may not)."""
+    with one_thread():
+        if not can_fork():
+            pytest.skip(NO_FORK)
+        yield
 
 
 @pytest.fixture

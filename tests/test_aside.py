@@ -11,15 +11,7 @@ import torch
 from ptwin.aside import Aside, can_fork
 from ptwin.fitting.lm import FitError
 from ptwin.threads import one_thread
-
-
-@pytest.fixture
-def forking():
-    """Within one thread, where Aside forks."""
-    with one_thread():
-        if not can_fork():
-            pytest.skip("no fork here (not Linux, or one core): Aside runs its function in the caller")
-        yield
+from tests.conftest import NO_FORK
 
 
 def test_the_value_is_computed_in_a_child_and_comes_back_whole(forking):
@@ -96,6 +88,15 @@ def test_without_a_fork_the_function_runs_in_the_caller_once_when_first_asked_fo
     assert calls == [os.getpid()]
 
 
+def test_a_machine_with_an_accelerator_does_not_fork(forking, monkeypatch):
+    # with a GPU in the machine autograd's engine starts a thread for it at the first backward pass, and a child
+    # forked after that refuses its own ("Unable to handle autograd's threading in combination with fork-based
+    # multiprocessing": train.py device=cpu on a lent H200); no GPU here, so the count is told
+    monkeypatch.setattr(torch.accelerator, "device_count", lambda: 1)
+    aside = Aside(os.getpid)
+    assert not aside.forked and aside.result() == os.getpid()
+
+
 def test_a_child_forked_within_one_thread_runs_torch_after_its_parent_ran_on_two(two_threads):
     # libgomp is not fork-safe: forked on two threads from a process that had run a team of two, a child's log10
     # (MKL's, threaded) waits forever at a barrier for threads that live only in the parent (tried: still waiting
@@ -105,7 +106,7 @@ def test_a_child_forked_within_one_thread_runs_torch_after_its_parent_ran_on_two
     assert not can_fork()
     with one_thread():
         if not can_fork():
-            pytest.skip("no fork here (not Linux, or one core)")
+            pytest.skip(NO_FORK)
         expected = values.log10().sum().item()
         with Aside(lambda: values.log10().sum().item()) as aside:
             aside._child.join(timeout=60)

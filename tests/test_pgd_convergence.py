@@ -68,7 +68,7 @@ def test_a_basis_is_the_same_whatever_the_thread_count_it_is_built_on():
     assert torch.get_num_threads() == threads  # the build gave the caller's threads back
 
 
-def test_the_richardson_mesh_solved_in_a_second_process_gives_the_basis_of_one_process(monkeypatch):
+def test_the_richardson_mesh_solved_in_a_second_process_gives_the_basis_of_one_process(forking, monkeypatch):
     # Where a second core is free, build_basis solves the coarse Richardson mesh in a forked process beside the
     # fine one; the basis must be the one a single process builds, to the bit (a cached basis names no machine).
     import torch

@@ -181,7 +181,7 @@ def test_the_basis_command_builds_where_train_py_looks(tmp_path):
 
 
 def test_train_py_trains_the_twin_aside_and_finds_what_one_process_finds_bit_for_bit(
-    tmp_path, coarse_cache, monkeypatch
+    tmp_path, coarse_cache, monkeypatch, forking
 ):
     # train.py trains its twin in a forked child while the diagnosis fits the base model and each term, and draws
     # the figures of stages 1–3 in another while the diagnosis goes on (``ptwin.aside``); here, with forks refused,
