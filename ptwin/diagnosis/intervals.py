@@ -68,7 +68,7 @@ def profile_interval(
 
     def refitted(fixed: torch.Tensor, free: list[int]) -> torch.Tensor:
         """``fixed`` with its entries ``free`` refitted (from their values there)."""
-        at = torch.tensor(free, dtype=torch.long)
+        at = torch.tensor(free, dtype=torch.long, device=fixed.device)
 
         def partial(rest):
             return residual(fixed.index_put((at,), rest))

@@ -89,7 +89,8 @@ class ErrorNetwork(nn.Module):
             weight = (self.force_scale / samples.noise_floor[index])[:, None]
             design = torch.cat([h, torch.ones_like(h[:, :1])], 1) * weight
             target = error / samples.noise_floor[index]
-            normal = design.T @ design + regularisation * torch.eye(design.shape[1], dtype=design.dtype)
+            eye = torch.eye(design.shape[1], dtype=design.dtype, device=design.device)
+            normal = design.T @ design + regularisation * eye
             try:
                 solution = torch.linalg.solve(normal, design.T @ target)
             except RuntimeError:  # singular at λ = 0 (hidden units that act alike): the least-norm optimum

@@ -97,8 +97,9 @@ class ParameterVector:
 
     def expand(self, per_name: dict[str, float], default: float = 1.0) -> torch.Tensor:
         """A per-entry vector from one value per parameter name (``default`` for the names not given)."""
+        device = self.get().device
         values = [
-            torch.full((s,), float(per_name.get(n, default)), dtype=torch.float64)
+            torch.full((s,), float(per_name.get(n, default)), dtype=torch.float64, device=device)
             for n, s in zip(self.names, self.sizes)
         ]
         return torch.cat(values)
