@@ -4,13 +4,18 @@ Prints, for the demo set, the identification and the hybrid stage (every λ of `
 ``train.py`` trains them) with ``device=cpu`` and with ``device=cuda``, each after one untimed run, and the K
 and validation RMSE each reached (they must agree: the device changes no number beyond rounding). Then
 ``map_bench``'s 16×16 map on a Dask LocalCluster over every core of the machine (spots on the CPU), and a
-sample of its spots serially on each device, with whether their verdicts agree. Nothing in ptwin requires a
-GPU; without one this prints one line and stops.
+sample of its spots serially on each device, with whether their verdicts agree. Last, the whole demo
+(``python train.py``) on each device, and how far apart any two numbers of their diagnosis.json lie. Nothing in
+ptwin requires a GPU; without one this prints one line and stops.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import subprocess
+import sys
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -64,6 +69,34 @@ def hybrid_stage(device: str, cache: Path, report: bool = True) -> None:
     )
 
 
+def whole_demo(cache: Path) -> None:
+    numbers = {}
+    with tempfile.TemporaryDirectory() as out:
+        for device in ("cpu", "cuda"):
+            started = time.perf_counter()
+            overrides = [f"device={device}", f"cache_dir={cache}", f"hydra.run.dir={out}/{device}"]
+            done = subprocess.run([sys.executable, "train.py", *overrides], cwd=ROOT, capture_output=True, text=True)
+            seconds = time.perf_counter() - started
+            if done.returncode:
+                print(f"  python train.py device={device} failed: {done.stderr.strip().splitlines()[-1:]}")
+                return
+            numbers[device] = _numbers(json.loads(Path(out, device, "diagnosis.json").read_text()))
+            print(f"  python train.py device={device}: {seconds:.1f} s wall", flush=True)
+    cpu, cuda = numbers["cpu"], numbers["cuda"]
+    spread = max(abs(a - b) / max(abs(a), abs(b), 1e-300) for a, b in zip(cpu, cuda))
+    same = "the same" if len(cpu) == len(cuda) else "NOT the same"
+    print(f"  their diagnosis.json: {same} {len(cpu)} numbers, the furthest apart by {spread:.1e} (relative)")
+
+
+def _numbers(tree) -> list[float]:
+    """Every number in a JSON tree, in document order."""
+    if isinstance(tree, dict):
+        return [n for value in tree.values() for n in _numbers(value)]
+    if isinstance(tree, list):
+        return [n for value in tree for n in _numbers(value)]
+    return [float(tree)] if isinstance(tree, int | float) and not isinstance(tree, bool) else []
+
+
 def local_map(cache: Path) -> None:
     folder, truth = generated_map(cache)
     cores = os.cpu_count()
@@ -115,6 +148,8 @@ def main() -> None:
     print(f"force map of map_bench ({len(generated_map(cache)[1])} spots):", flush=True)
     local_map(cache)
     serial_spots(cache)
+    print("demo set, the whole run:", flush=True)
+    whole_demo(cache)
 
 
 if __name__ == "__main__":
