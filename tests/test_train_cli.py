@@ -183,12 +183,13 @@ def test_the_basis_command_builds_where_train_py_looks(tmp_path):
 def test_train_py_trains_the_twin_aside_and_finds_what_one_process_finds_bit_for_bit(
     tmp_path, coarse_cache, monkeypatch, forking
 ):
-    # train.py trains its twin in a forked child while the diagnosis fits the base model and each term, and draws
-    # the figures of stages 1–3 in another while the diagnosis goes on (``ptwin.aside``); here, with forks refused,
-    # all of it is done in this process. The short baselines of the simulated set make the diagnosis read the noise
-    # off the twin's residual.
+    # train.py trains its twin in a forked child while the diagnosis fits the base model and each term, draws the
+    # figures of stages 1–3 in another while the diagnosis goes on, and the corrected model's in a third while it
+    # finds their intervals (``ptwin.aside``); here, with forks refused, all of it is done in this process. The
+    # short baselines of the simulated set make the diagnosis read the noise off the twin's residual.
     import json
 
+    import ptwin.aside
     import ptwin.pipeline.twin
     from ptwin.data.noise import RESIDUAL
     from tests.conftest import run, simulated_set
@@ -199,6 +200,7 @@ def test_train_py_trains_the_twin_aside_and_finds_what_one_process_finds_bit_for
     assert result.returncode == 0, result.stderr[-2000:]
     assert "LM over the λ grid (aside, while the diagnosis fits what does not need it)" in result.stdout
     monkeypatch.setattr(ptwin.pipeline.twin, "can_fork", lambda: False)
+    monkeypatch.setattr(ptwin.aside, "can_fork", lambda: False)
     lines = []
     here = run(folder, coarse_cache, tmp_path / "here", *overrides, figures=True, progress=lines.append)
     assert not any("(aside," in line for line in lines)

@@ -187,13 +187,15 @@ def diagnose(
     progress: Callable[[str], None] = print,
     notes: list[str] | None = None,
     design: ExperimentDesign | None = None,
+    on_chosen: Callable[[tuple[str, ...], PhysicsFit], None] | None = None,
 ) -> Diagnosis:
     """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); candidate fits run
     ``iterations`` LM steps; ``noise`` is the set's noise model; ``first``: the structure test and the base
     model and single terms fitted under it (``first_fits``), reused as they are; ``notes``: evidence about the
     data, in sentences; ``design``: what proposes the next experiment of each confounded group (None: none
     proposed); ``hybrid``: the trained hybrid twin, whose learned error the named terms are compared with (None:
-    not trained)."""
+    not trained); ``on_chosen``: told the terms chosen and their fit as soon as they are, before their intervals
+    (a run draws the corrected model's figures meanwhile)."""
     s, test = settings, first.test
     seen = split.judged(samples)
     twin = _twin_rmse(hybrid, samples, split)
@@ -208,6 +210,8 @@ def diagnose(
     base_residual = fitted_difference(base.fit.model, samples, split.train)[seen]
     where = locate(samples, base_residual, seen, s.block, test) if pick.structured else []
     chosen, corrected = pick.chosen, candidates[pick.chosen]
+    if on_chosen is not None:
+        on_chosen(chosen, corrected.fit)
     # Failed fits and fits whose terms do nothing say so here; non-physical ones are listed as rejected.
     notes = [*(notes or []), *pick.notes]
     notes += [f"{' + '.join(t) or 'base'}: {c.state}" for t, c in candidates.items() if c.without_effect]
@@ -217,12 +221,7 @@ def diagnose(
     confounds = [_confound(chosen, other, candidates) for other in rivals]
     predictions = _tell_apart(confounds, rivals, corrected, candidates, design, progress) if design is not None else []
     progress("diagnosis: the named terms on curves left out of the fit, and intervals under the noise model")
-    witness = None
-    if hybrid is not None:
-        with torch.no_grad():
-            learned = hybrid.network(samples)[seen]
-            named = corrected.fit.model(samples)[seen] - base.fit.model(samples)[seen]
-        witness = _explained_fraction(learned, named)
+    witness = _witness(hybrid, samples, seen, corrected, base)
     left = test.words(corrected.whiteness) if pick.unexplained else None
     context = _Context(
         samples, split, seen, candidates, corrected, fit, noise, witness, left, pick.on_curves, pick.unproven
@@ -724,6 +723,16 @@ def _fit_table(samples, split, base: Candidate, corrected: Candidate, twin: dict
         "corrected": {"val_rmse": corrected.val_rmse, "test_rmse": _test_rmse(corrected, samples, split)},
         "hybrid": twin,
     }
+
+
+def _witness(hybrid: HybridTwin | None, samples, seen, corrected: Candidate, base: Candidate) -> float | None:
+    """The share of the hybrid network's learned error the named terms account for (None: no twin)."""
+    if hybrid is None:
+        return None
+    with torch.no_grad():
+        learned = hybrid.network(samples)[seen]
+        named = corrected.fit.model(samples)[seen] - base.fit.model(samples)[seen]
+    return _explained_fraction(learned, named)
 
 
 def _explained_fraction(network: torch.Tensor, named: torch.Tensor) -> float:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field, replace
 from functools import partial
 from pathlib import Path
@@ -28,11 +29,12 @@ from ptwin.fitting.inflation_range import InflationRange, recorded
 from ptwin.fitting.physics_fit import PhysicsFit
 from ptwin.physics.samples import Samples
 from ptwin.physics.terms import VOCABULARY
+from ptwin.pipeline.drawing import Drawing
 from ptwin.pipeline.identify import Identification, identify, per_curve_fits
 from ptwin.pipeline.prepare import Prepared, fitted_samples, prepare
 from ptwin.pipeline.settings import Settings
 from ptwin.pipeline.twin import TwinAside
-from ptwin.reporting.figures import figure_file, save_figures
+from ptwin.reporting.figures import diagnosis_figures, figure_file, in_paper_order, proposal_figures, stage_figures
 from ptwin.reporting.report import print_summary
 from ptwin.reporting.results import (
     apparent_record,
@@ -90,23 +92,21 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
 
     draw = partial(_stage_figures, output_dir, prepared, identification) if settings.figures else None
     twin_aside = TwinAside(prepared, identification.base.permeability, noise, settings, output_dir, progress, draw)
-    with twin_aside as aside:
-        diagnosis = diagnose_set(prepared, identification, aside.twin, settings, progress)
+    with twin_aside as aside, ExitStack() as drawings:
+        corrected_drawing: list[Drawing] = []
+
+        def draw_corrected(chosen: tuple[str, ...], corrected: PhysicsFit) -> None:
+            iterations = settings.optim.physics_fit.iterations
+            draw = partial(_corrected_figures, output_dir, prepared, identification, aside.twin(), iterations)
+            corrected_drawing.append(drawings.enter_context(Drawing(partial(draw, chosen, corrected))))
+
+        chosen = draw_corrected if settings.figures else None
+        diagnosis = diagnose_set(prepared, identification, aside.twin, settings, progress, on_chosen=chosen)
         outcome = aside.outcome()
         figures = {}
         if settings.figures:
-            figures = save_figures(
-                output_dir,
-                samples,
-                split,
-                identification,
-                outcome.twin,
-                diagnosis,
-                _corrected_per_curve(prepared, diagnosis, settings.optim.physics_fit.iterations),
-                prepared.rate,
-                progress,
-                drawn=aside.drawn,
-            )
+            taken = {**aside.drawn(), **corrected_drawing[0].figures(progress)}
+            figures = in_paper_order({**taken, **proposal_figures(output_dir, diagnosis.predictions, progress)})
     results = _results(prepared, identification, settings)
     results["stages"]["hybrid"] = hybrid_stage(outcome, samples, split, settings.optim.hybrid)
     results["noise_floor"] = noise
@@ -132,8 +132,23 @@ def _stage_figures(
     output_dir: Path, prepared: Prepared, identification: Identification, twin: HybridTwin, say: Callable[[str], None]
 ) -> dict:
     """The figures of stages 1–3, which the diagnosis does not change: drawn aside beside it (``TwinAside``)."""
-    samples, split, rate = prepared.samples, prepared.split, prepared.rate
-    return save_figures(output_dir, samples, split, identification, twin, None, None, rate, say)
+    return stage_figures(output_dir, prepared.samples, prepared.split, identification, twin, prepared.rate, say)
+
+
+def _corrected_figures(
+    output_dir: Path,
+    prepared: Prepared,
+    identification: Identification,
+    twin: HybridTwin,
+    iterations: int,
+    chosen: tuple[str, ...],
+    corrected: PhysicsFit,
+    say: Callable[[str], None],
+) -> dict:
+    """The figures of the corrected model: drawn aside while the diagnosis finds its intervals."""
+    per_curve = _corrected_per_curve(prepared, chosen, corrected.params, iterations)
+    samples, split = prepared.samples, prepared.split
+    return diagnosis_figures(output_dir, samples, split, identification, twin, chosen, corrected.model, per_curve, say)
 
 
 def _alone(diagnosis: Diagnosis, term: str) -> dict[str, float] | None:
@@ -148,18 +163,19 @@ def diagnose_set(
     twin: Callable[[], HybridTwin] | None,
     settings: Settings,
     progress: Callable[[str], None] = print,
+    on_chosen: Callable[[tuple[str, ...], PhysicsFit], None] | None = None,
 ) -> Diagnosis:
     """The diagnosis stage on a prepared and identified set (``twin``: the hybrid twin when asked for, None where
-    none is trained). Where the set's baselines were too short to measure the noise's correlation, it is measured
-    on the twin's residual in contact (``ptwin.data.noise.residual_noise``), or without a twin on the base model's
-    less a polynomial per curve (``FLEXIBLE_DEGREE``), whose σ the base model is refitted under. The base model and
-    each single term are fitted first (``first_fits``) under the reading then at hand: before the twin is asked
-    for, so one training aside (``TwinAside``) goes on meanwhile. Where the baselines or the twin's residual
-    measured the correlation, a reading above what those fits' residuals show is capped (``_capped_by_residuals``):
-    what the twin misses of a term reads as correlation as a baseline's drift does (a pore relaxation with a hold
-    and a creep, white noise: κ² 18.0 off the twin's residual, 1.23 capped). A fit's optimum never reads κ², so
-    the first fits are read under the reading that stands, or made again where a decision on the way to them turns
-    between the two (``ptwin.fitting.inflation_range``)."""
+    none is trained; ``on_chosen``: as ``diagnose``'s). Where the set's baselines were too short to measure the
+    noise's correlation, it is measured on the twin's residual in contact (``ptwin.data.noise.residual_noise``), or
+    without a twin on the base model's less a polynomial per curve (``FLEXIBLE_DEGREE``), whose σ the base model is
+    refitted under. The base model and each single term are fitted first (``first_fits``) under the reading then at
+    hand: before the twin is asked for, so one training aside (``TwinAside``) goes on meanwhile. Where the baselines
+    or the twin's residual measured the correlation, a reading above what those fits' residuals show is capped
+    (``_capped_by_residuals``): what the twin misses of a term reads as correlation as a baseline's drift does (a
+    pore relaxation with a hold and a creep, white noise: κ² 18.0 off the twin's residual, 1.23 capped). A fit's
+    optimum never reads κ², so the first fits are read under the reading that stands, or made again where a decision
+    on the way to them turns between the two (``ptwin.fitting.inflation_range``)."""
     block, base_fit = settings.diagnosis.block, identification.base
     # read off the base model's residual, σ is corrected by it (no twin): the fits follow it
     measured = _on_base_residual(prepared, base_fit, block) if twin is None else None
@@ -203,6 +219,7 @@ def diagnose_set(
         progress,
         notes=notes,
         design=_design(prepared, settings) if settings.diagnosis.design else None,
+        on_chosen=on_chosen,
     )
 
 
@@ -355,13 +372,13 @@ def _design(prepared: Prepared, settings: Settings) -> ExperimentDesign:
     )
 
 
-def _corrected_per_curve(prepared: Prepared, diagnosis: Diagnosis, iterations: int):
-    """K per curve with the named terms frozen at their global values, for figure 5 (None when nothing was named)."""
-    if not diagnosis.chosen:
+def _corrected_per_curve(prepared: Prepared, chosen: tuple[str, ...], values: dict, iterations: int):
+    """K per curve with the terms ``chosen`` frozen at their global ``values``, for figure 5 (None when nothing was
+    named)."""
+    if not chosen:
         return None
-    values = diagnosis.corrected.fit.params
     samples, train = prepared.samples, prepared.split.train
-    return per_curve_fits(prepared.make_model, samples, train, diagnosis.chosen, iterations, False, values)
+    return per_curve_fits(prepared.make_model, samples, train, chosen, iterations, False, values)
 
 
 def _results(prepared: Prepared, identification: Identification, settings: Settings) -> dict:

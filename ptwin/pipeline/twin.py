@@ -13,6 +13,7 @@ from ptwin.aside import Aside, can_fork
 from ptwin.fitting import checkpoint
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import HybridOutcome, train_hybrid
+from ptwin.pipeline.drawing import Drawing
 from ptwin.pipeline.prepare import Prepared
 from ptwin.pipeline.settings import Settings
 from ptwin.reporting.tensorboard import TrainingLog
@@ -96,7 +97,7 @@ class TwinAside:
             twin.load_state_dict(state)
             self._outcome = HybridOutcome(twin=twin, **rest)
             if self._draw is not None:
-                self._drawing = Aside(partial(_said, partial(self._draw, twin)), fork=self._forked)
+                self._drawing = Drawing(partial(self._draw, twin), fork=self._forked)
         return self._outcome
 
     def twin(self) -> HybridTwin:
@@ -105,12 +106,7 @@ class TwinAside:
     def drawn(self) -> dict:
         """What ``draw`` drew of the trained twin ({} without ``draw``), its lines said now."""
         self.outcome()
-        if self._drawing is None:
-            return {}
-        figures, lines = self._drawing.result()
-        for line in lines:
-            self._progress(line)
-        return figures
+        return {} if self._drawing is None else self._drawing.figures(self._progress)
 
     def __enter__(self) -> TwinAside:
         return self
@@ -119,9 +115,3 @@ class TwinAside:
         for aside in (self._aside, self._drawing):
             if aside is not None:
                 aside.__exit__(*exc)
-
-
-def _said(work: Callable[[Callable[[str], None]], dict]) -> tuple[dict, list[str]]:
-    """(what ``work`` returns, the lines it said): a child's lines are said by its parent."""
-    lines = []
-    return work(lines.append), lines

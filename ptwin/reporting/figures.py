@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import re
-from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib
@@ -85,41 +84,21 @@ def _per_speed(samples, index, series: dict, ylabel: str, title: str, residual=F
 
 
 def figure_file(output_dir: Path, name: str) -> Path:
-    """Where ``save_figures`` writes figure ``name`` (report.md links it by that name)."""
+    """Where figure ``name`` is written (report.md links it by that name)."""
     return output_dir / f"{name}.png"
 
 
-def save_figures(
-    output_dir: Path,
-    samples,
-    split,
-    identification,
-    twin,
-    diagnosis,
-    corrected_per_curve,
-    rate=None,
-    progress=print,
-    drawn: Callable[[], dict] | None = None,
-):
-    """Write the figures as PNG into ``output_dir``; returns {name: figure} for TensorBoard, the paper's by number
-    first.
+def stage_figures(output_dir: Path, samples, split, identification, twin, rate=None, progress=print) -> dict:
+    """The figures of stages 1–3, saved as PNG into ``output_dir``: the paper's 3, 4 and 6–9 and the rate effect.
+    The diagnosis changes none of them, so a run draws them aside beside it. Returns {name: figure}.
 
-    ``identification``: stages 1–2 (``base``, ``apparent``, ``viscous_per_curve``); ``twin``: the hybrid
-    twin; ``diagnosis``: the diagnosis, or None for the figures of stages 1–3 alone (the paper's 3, 4 and 6–9, the
-    rate effect), which need none, so a run draws them aside beside it; ``drawn``: those, drawn so, asked for once
-    the rest are drawn and taken as they are; ``corrected_per_curve``: K per curve of the corrected model, or None;
+    ``identification``: stages 1–2 (``base``, ``apparent``, ``viscous_per_curve``); ``twin``: the hybrid twin;
     ``rate``: the rate effect before any model (``ptwin.data.evidence.RateEffect``), or None. A figure matplotlib
-    cannot draw from these data is left out with one line saying so.
-    """
-    base, apparent = identification.base, identification.apparent
-    with torch.no_grad():  # evaluated where the models live, plotted from the CPU
-        base_force = base.model(samples).cpu()
-        physics, correction = (force.cpu() for force in twin(samples))
-        corrected = diagnosis.corrected.fit.model(samples).cpu() if diagnosis is not None else None
-    samples = samples.to("cpu")
-    split = Split(*(part.cpu() for part in (split.train, split.val, split.test)))
-    index = torch.cat([split.train, split.val, split.test]).sort().values
-    stages = {
+    cannot draw from these data is left out with one line saying so (here and in the functions below)."""
+    base_force, physics, correction = _forces(samples, identification.base.model, twin)
+    samples, split, index = _on_cpu(samples, split)
+    apparent = identification.apparent
+    builders = {
         "fig3_curves_base_model": lambda: _per_speed(
             samples, index, {"elastic + Darcy": base_force}, "force [nN]", "Measured curves and the base model"
         ),
@@ -141,19 +120,58 @@ def save_figures(
         ),
     }
     if rate is not None:
-        stages["rate_effect"] = lambda: _rate_effect(rate)
-    if diagnosis is None:
-        return _drawn(output_dir, stages, progress)
+        builders["rate_effect"] = lambda: _rate_effect(rate)
+    return _drawn(output_dir, builders, progress)
+
+
+def diagnosis_figures(
+    output_dir: Path, samples, split, identification, twin, chosen, corrected_model, corrected_per_curve, progress=print
+) -> dict:
+    """The figures of the corrected model (the terms ``chosen``, ``corrected_model`` their fitted model), saved as
+    PNG into ``output_dir``: the paper's 5 (``corrected_per_curve``: K per curve of the corrected model, or None),
+    the holds and creeps where there are any, and the diagnosis's residuals and its network against the named
+    terms. Returns {name: figure}."""
+    base_force, _, correction = _forces(samples, identification.base.model, twin)
+    with torch.no_grad():
+        corrected = corrected_model(samples).cpu()
+    samples, split, index = _on_cpu(samples, split)
+    apparent, base = identification.apparent, identification.base
     builders = {"fig5_permeability_speed": lambda: _permeability_against_speed(apparent, base, corrected_per_curve)}
     if bool((samples.in_contact & ((samples.segment == HOLD) | (samples.segment == CREEP))).any()):
         series = {"base": base_force, "corrected": corrected}
         builders["holds_force_time"] = lambda: _holds(samples, series)
-    builders.update(_diagnosis_figures(samples, index, base_force, correction, corrected, diagnosis.chosen))
-    for number, prediction in enumerate(diagnosis.predictions, start=1):
-        builders[f"next_experiment_{number}"] = lambda prediction=prediction: _proposal(prediction)
-    rest = _drawn(output_dir, builders, progress)
-    figures = {**(_drawn(output_dir, stages, progress) if drawn is None else drawn()), **rest}
+    builders.update(_diagnosis_figures(samples, index, base_force, correction, corrected, chosen))
+    return _drawn(output_dir, builders, progress)
+
+
+def proposal_figures(output_dir: Path, predictions, progress=print) -> dict:
+    """The next experiments the diagnosis proposes (``Diagnosis.predictions``), a figure each, saved as PNG into
+    ``output_dir``. Returns {name: figure}."""
+    builders = {
+        f"next_experiment_{number}": lambda prediction=prediction: _proposal(prediction)
+        for number, prediction in enumerate(predictions, start=1)
+    }
+    return _drawn(output_dir, builders, progress)
+
+
+def in_paper_order(figures: dict) -> dict:
+    """The paper's figures by their number, the others after them in the order they came."""
     return dict(sorted(figures.items(), key=_paper_number))
+
+
+def _forces(samples, base_model, twin) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The base model's force, the twin's physics and its network's correction [N], evaluated where the models
+    live and brought to the CPU to be plotted."""
+    with torch.no_grad():
+        physics, correction = (force.cpu() for force in twin(samples))
+        return base_model(samples).cpu(), physics, correction
+
+
+def _on_cpu(samples, split):
+    """``samples`` and ``split`` on the CPU, and the index of every sample of the split in time order."""
+    samples = samples.to("cpu")
+    split = Split(*(part.cpu() for part in (split.train, split.val, split.test)))
+    return samples, split, torch.cat([split.train, split.val, split.test]).sort().values
 
 
 def _drawn(output_dir: Path, builders: dict, progress) -> dict:
@@ -173,7 +191,7 @@ def _drawn(output_dir: Path, builders: dict, progress) -> dict:
 
 
 def _paper_number(item: tuple[str, object]) -> tuple[int, int]:
-    """The paper's figures by their number, the others after them in the order they came (a stable sort)."""
+    """A figure's place: the paper's by their number, the others after them (a stable sort keeps their order)."""
     number = re.match(r"fig(\d+)_", item[0])
     return (0, int(number[1])) if number else (1, 0)
 
