@@ -12,14 +12,19 @@ Say = Callable[[str], None]
 
 
 class Drawing:
-    """``draw(say)`` → {name: figure}, run aside where a fork may be made (``fork``); ``figures(progress)`` waits for
-    them and says through ``progress`` what ``draw`` said. Leave it as a context manager: drawing still going when
-    the caller fails is stopped."""
+    """``start(draw)`` runs ``draw(say)`` → {name: figure} aside, where a fork may be made (``fork``);
+    ``figures(progress)`` waits for them ({} where none was started) and says through ``progress`` what ``draw``
+    said. Leave it as a context manager: drawing still going when the caller fails is stopped."""
 
-    def __init__(self, draw: Callable[[Say], dict], fork: bool = True):
+    def __init__(self):
+        self._aside: Aside | None = None
+
+    def start(self, draw: Callable[[Say], dict], fork: bool = True) -> None:
         self._aside = Aside(partial(_said, draw), fork=fork)
 
     def figures(self, progress: Say) -> dict:
+        if self._aside is None:
+            return {}
         figures, lines = self._aside.result()
         for line in lines:
             progress(line)
@@ -29,7 +34,8 @@ class Drawing:
         return self
 
     def __exit__(self, *exc) -> None:
-        self._aside.__exit__(*exc)
+        if self._aside is not None:
+            self._aside.__exit__(*exc)
 
 
 def _said(draw: Callable[[Say], dict]) -> tuple[dict, list[str]]:

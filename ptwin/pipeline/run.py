@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field, replace
 from functools import partial
 from pathlib import Path
@@ -92,20 +91,21 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
 
     draw = partial(_stage_figures, output_dir, prepared, identification) if settings.figures else None
     twin_aside = TwinAside(prepared, identification.base.permeability, noise, settings, output_dir, progress, draw)
-    with twin_aside as aside, ExitStack() as drawings:
-        corrected_drawing: list[Drawing] = []
+    with twin_aside as aside, Drawing() as corrected_figures:
 
         def draw_corrected(chosen: tuple[str, ...], corrected: PhysicsFit) -> None:
             iterations = settings.optim.physics_fit.iterations
-            draw = partial(_corrected_figures, output_dir, prepared, identification, aside.twin(), iterations)
-            corrected_drawing.append(drawings.enter_context(Drawing(partial(draw, chosen, corrected))))
+            twin = aside.twin()
+            corrected_figures.start(
+                partial(_corrected_figures, output_dir, prepared, identification, twin, iterations, chosen, corrected)
+            )
 
-        chosen = draw_corrected if settings.figures else None
-        diagnosis = diagnose_set(prepared, identification, aside.twin, settings, progress, on_chosen=chosen)
+        on_chosen = draw_corrected if settings.figures else None
+        diagnosis = diagnose_set(prepared, identification, aside.twin, settings, progress, on_chosen)
         outcome = aside.outcome()
         figures = {}
         if settings.figures:
-            taken = {**aside.drawn(), **corrected_drawing[0].figures(progress)}
+            taken = {**aside.drawn(), **corrected_figures.figures(progress)}
             figures = in_paper_order({**taken, **proposal_figures(output_dir, diagnosis.predictions, progress)})
     results = _results(prepared, identification, settings)
     results["stages"]["hybrid"] = hybrid_stage(outcome, samples, split, settings.optim.hybrid)

@@ -76,7 +76,7 @@ class TwinAside:
         progress(f"stage 3: the hybrid twin (K learnable + MLP of the model error), LM over the λ grid{aside}")
         samples, split = prepared.samples, prepared.split
         self._make_twin, self._outcome = _twin_maker(prepared, permeability, noise), None
-        self._draw, self._drawing, self._forked, self._progress = draw, None, forked, progress
+        self._draw, self._drawing, self._forked, self._progress = draw, Drawing(), forked, progress
 
         def trained() -> tuple[dict, dict]:
             hybrid = settings.optim.hybrid
@@ -97,7 +97,7 @@ class TwinAside:
             twin.load_state_dict(state)
             self._outcome = HybridOutcome(twin=twin, **rest)
             if self._draw is not None:
-                self._drawing = Drawing(partial(self._draw, twin), fork=self._forked)
+                self._drawing.start(partial(self._draw, twin), fork=self._forked)
         return self._outcome
 
     def twin(self) -> HybridTwin:
@@ -106,12 +106,11 @@ class TwinAside:
     def drawn(self) -> dict:
         """What ``draw`` drew of the trained twin ({} without ``draw``), its lines said now."""
         self.outcome()
-        return {} if self._drawing is None else self._drawing.figures(self._progress)
+        return self._drawing.figures(self._progress)
 
     def __enter__(self) -> TwinAside:
         return self
 
     def __exit__(self, *exc) -> None:
-        for aside in (self._aside, self._drawing):
-            if aside is not None:
-                aside.__exit__(*exc)
+        self._aside.__exit__(*exc)
+        self._drawing.__exit__(*exc)
