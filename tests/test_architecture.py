@@ -9,7 +9,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 # Lowest first: a room may import its own modules and any room before it, never one after it.
 LAYERS = [
-    ("files", "checks", "threads"),
+    ("files", "checks", "threads", "heap"),
     ("aside",),
     ("pgd",),
     ("data",),

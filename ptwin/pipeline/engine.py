@@ -9,16 +9,15 @@ after its first spot (``ptwin.pgd.cache``).
 
 from __future__ import annotations
 
-import ctypes
 import os
 from collections.abc import Callable, Iterator, Sequence
 from functools import partial
 
+from ptwin.heap import keep_heap
 from ptwin.threads import one_thread
 
 SERIAL, LOCAL = "serial", "local"
 CONNECT_SECONDS = 10
-M_MMAP_THRESHOLD = -3  # glibc's mallopt parameter (malloc.h)
 
 
 class EngineError(ValueError):
@@ -26,20 +25,9 @@ class EngineError(ValueError):
 
 
 def _single_threaded(function: Callable, item):
-    _heap_for_tensors()
+    keep_heap()  # Dask's nannies set glibc's trim threshold, which freezes its mmap threshold (ptwin.heap)
     with one_thread():
         return function(item)
-
-
-def _heap_for_tensors() -> None:
-    """Keep glibc's allocator from mapping every tensor over 128 KiB anew. Dask's nannies start workers with
-    MALLOC_TRIM_THRESHOLD_ set, which also freezes the mmap threshold at 128 KiB: each such tensor is then
-    mmapped, unmapped and page-faulted again, a third of a spot's time in the kernel. Without glibc: nothing."""
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-    except OSError:  # not glibc
-        return
-    libc.mallopt(M_MMAP_THRESHOLD, 32 * 2**20)  # glibc's largest
 
 
 def run_each(
