@@ -5,9 +5,10 @@ glibc maps an allocation above its mmap threshold anew and gives it back to the 
 back the heap's free top above its trim threshold; both thresholds start at 128 KiB and grow only as large blocks
 come back. A fit makes and drops its tensors at every LM step (a power law's 43 modes × 8000 samples: 2.7 MB each),
 so each was page-faulted again: the demo's power-law fit took 0.77–0.85 s, 0.54–0.69 s with the heap kept, and the
-warm demo 6.73–7.05 s against 6.60–6.84 s (five runs each, interleaved). Dask's nannies start their workers with
+warm demo 6.53–7.14 s against 6.48–6.81 s (eight runs each, interleaved). Dask's nannies start their workers with
 ``MALLOC_TRIM_THRESHOLD_`` set, which also freezes the mmap threshold at 128 KiB: a third of a map spot's time was in
-the kernel there before its worker kept the heap.
+the kernel there until its worker kept the mmap threshold, and 48 spots on two workers took 36.7 and 37.4 s with the
+trim threshold left at 64 KiB against 34.7 and 35.0 s with it kept too.
 """
 
 from __future__ import annotations
