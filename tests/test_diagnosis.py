@@ -506,6 +506,43 @@ def test_fits_that_do_not_nest_are_fitted_again_from_their_neighbours_optimum(mo
     }
 
 
+def test_a_physical_fit_above_the_model_it_nests_is_held_at_that_models_optimum_where_lm_leaves_the_physics(
+    monkeypatch,
+):
+    # The term's starts end physical at χ² 2100 above the base model's 2000 (a weak power law's worse local optimum);
+    # LM from the base model's optimum goes below it at a negative exponent, not physical. The least χ² known of a
+    # physical fit is the base model's optimum with the term doing nothing: that fit is kept, at 2000, no LM step.
+    import ptwin.diagnosis.name as name
+
+    refits = []
+
+    def fake(subset, chi, violations=None):
+        fit = candidate(subset, chi, 1.0, violations).fit
+        fit.model = lambda samples: samples.force + len(subset)
+        fit.chi_square_without = {t: chi + 1e3 for t in subset}
+        return fit
+
+    def fit_with_starts(make_model, subset, samples, index, iterations, base=None):
+        return fake(subset, 2000.0 if not subset else 2100.0)
+
+    def fit_from(make_model, subset, start, samples, index, iterations, reference_free, grown=False):
+        refits.append((subset, start.terms, iterations))
+        if iterations == 0:
+            return fake(subset, start.chi_square)
+        return fake(subset, start.chi_square - 10.0, {"a": "p < 0"})
+
+    monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
+    monkeypatch.setattr(name, "fit_from", fit_from)
+    monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: 50.0)
+    samples, split = ten_samples()
+    lines = []
+    candidates = name.fit_candidates(None, samples, split, ["a"], 1, 7, 50, ABOVE_FIVE, progress=lines.append)
+    assert refits == [(("a",), (), 7), (("a",), (), 0)]
+    held = candidates[("a",)].fit
+    assert held.physical and held.chi_square == 2000.0
+    assert lines[-1].endswith("held at base's optimum, a doing nothing")
+
+
 @pytest.mark.parametrize(("base_whiteness", "largest"), [(2.0, 1), (50.0, 2)])
 def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leaves_structure(
     monkeypatch, base_whiteness, largest
