@@ -506,12 +506,14 @@ def test_fits_that_do_not_nest_are_fitted_again_from_their_neighbours_optimum(mo
     }
 
 
-def test_a_physical_fit_above_the_model_it_nests_is_held_at_that_models_optimum_where_lm_leaves_the_physics(
-    monkeypatch,
+@pytest.mark.parametrize(("margin", "held"), [(10.0, True), (60.0, False)])
+def test_a_physical_fit_beyond_the_margin_above_the_model_it_nests_is_held_at_that_models_optimum(
+    monkeypatch, margin, held
 ):
-    # The term's starts end physical at χ² 2100 above the base model's 2000 (a weak power law's worse local optimum);
-    # LM from the base model's optimum goes below it at a negative exponent, not physical. The least χ² known of a
-    # physical fit is the base model's optimum with the term doing nothing: that fit is kept, at 2000, no LM step.
+    # The term's starts end physical at χ² 2100 above the base model's 2000, 55.7 BIC above it (a weak power law's
+    # worse local optimum); LM from the base model's optimum goes below it at a negative exponent, not physical.
+    # Beyond the margin the least χ² known of a physical fit, the base model's optimum with the term doing nothing,
+    # is kept, at 2000, no LM step; within it the fit found stands, a basin the data do not rule out.
     import ptwin.diagnosis.name as name
 
     refits = []
@@ -536,11 +538,13 @@ def test_a_physical_fit_above_the_model_it_nests_is_held_at_that_models_optimum_
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: 50.0)
     samples, split = ten_samples()
     lines = []
-    candidates = name.fit_candidates(None, samples, split, ["a"], 1, 7, 50, ABOVE_FIVE, progress=lines.append)
-    assert refits == [(("a",), (), 7), (("a",), (), 0)]
-    held = candidates[("a",)].fit
-    assert held.physical and held.chi_square == 2000.0
-    assert lines[-1].endswith("held at base's optimum, a doing nothing")
+    candidates = name.fit_candidates(
+        None, samples, split, ["a"], 1, 7, 50, ABOVE_FIVE, progress=lines.append, bic_margin=margin
+    )
+    assert refits == [(("a",), (), 7), (("a",), (), 0)][: 1 + held]
+    kept = candidates[("a",)].fit
+    assert kept.physical and kept.chi_square == (2000.0 if held else 2100.0)
+    assert lines[-1].endswith("held at base's optimum, a doing nothing") == held
 
 
 @pytest.mark.parametrize(("base_whiteness", "largest"), [(2.0, 1), (50.0, 2)])

@@ -149,12 +149,12 @@ def fit_candidates(
         for subset in subsets:
             fit = None if forward is None else refit(subset, forward.terms, grown=True)
             add(subset, fit, f" grown from {' + '.join(forward.terms)}" if fit else "")
-        _nest(candidates, refit, add)
+        _nest(candidates, refit, add, bic_margin)
         if preferred_subsets(candidates, size, bic_margin):  # k terms needed: the k − 1 may stand in for one
             for subset in itertools.combinations(terms, size):
                 if subset not in candidates:
                     add(subset)
-            _nest(candidates, refit, add)
+            _nest(candidates, refit, add, bic_margin)
         base_within_noise = not candidates[()].leaves_structure(test)
     return candidates
 
@@ -184,7 +184,7 @@ def _to_fit(
 NESTED_SLACK = 0.1  # χ² (noise units) by which two fits may break nesting before one is refitted from the other
 
 
-def _nest(candidates: dict, refit: Callable, add: Callable) -> None:
+def _nest(candidates: dict, refit: Callable, add: Callable, bic_margin: float = math.inf) -> None:
     """Make the fits nest: each subset's χ² no more than that of every subset of it one term smaller, and no more
     than the cost of every subset one term larger with that term taken out (``PhysicsFit.chi_square_without``), by
     ``NESTED_SLACK``. Every fit is a local optimum reached from a few starts, and one subset's starts can find a
@@ -198,12 +198,15 @@ def _nest(candidates: dict, refit: Callable, add: Callable) -> None:
     first, so that a repaired one can repair those below it.
 
     A physical fit that stays above a smaller one after that (LM from the smaller optimum left the physical region)
-    is replaced by the smaller optimum with the term where it does nothing: the least χ² known of a physical fit of
-    the larger subset, whose constrained optimum lies on the boundary, where the term is read as doing nothing. A
-    weak power law on a soft cantilever (seed 7 of the rheology suite, α 0.03 concealed) ended at α 0.078 and BIC
-    63.8 against the base model's −0.4, and was listed as a physical fit; refitted from the base model it reached
-    α < 0 below the base model's χ² (as on the shared p03: α 0.048 at χ² 544.1, α −0.018 at 528.8, the base model
-    530.7)."""
+    stands for its model while it is within ``bic_margin`` of the smaller one: another basin the data do not rule
+    out says so, and what it says of K counts (a solid relaxation with no fluid force at all on a soft null of two
+    speeds, 9.2 BIC above the base model: K not fixed). Beyond the margin it is no rival of anything and says only
+    that LM found a poor basin; it is replaced by the smaller optimum with the term where it does nothing, the least
+    χ² known of a physical fit of its model, where the term is read as doing nothing. A weak power law on a soft
+    cantilever (seed 7 of the rheology suite, α 0.03 concealed) ended at α 0.078, 64 BIC above the base model, so
+    no rival of it; refitted from the base model it reached α < 0 below the base model's χ² (as on the shared p03:
+    α 0.048 at χ² 544.1, α −0.018 at 528.8, the base model 530.7). Held there it is one: the data cannot tell the
+    two apart."""
 
     def repaired(subset: tuple[str, ...], start: tuple[str, ...], how: str, steps: int | None = None) -> bool:
         """``subset`` refitted from ``start``'s optimum (``refit``), kept where better; whether it was."""
@@ -240,7 +243,7 @@ def _nest(candidates: dict, refit: Callable, add: Callable) -> None:
                 start = " + ".join(smaller) or "base"
                 if repaired(larger, smaller, f" refitted from {start} with {term} added"):
                     changed = True
-                elif large is not None and large.physical:
+                elif large is not None and large.physical and large.bic > small.bic + bic_margin:
                     changed |= repaired(larger, smaller, f" held at {start}'s optimum, {term} doing nothing", steps=0)
         if not changed:
             return
