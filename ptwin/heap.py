@@ -1,5 +1,6 @@
-"""glibc's heap kept for ptwin's tensors. Below every room, beside ``threads.py``: the faces and a map's workers call
-it once.
+"""glibc's heap kept for ptwin's tensors. Below every room, beside ``threads.py``: the faces call it once their imports
+are done, a map's engine before each spot it runs (a worker's first spot sets it for the rest; setting it again
+changes nothing).
 
 glibc maps an allocation above its mmap threshold anew and gives it back to the kernel when it is freed, and gives
 back the heap's free top above its trim threshold; both thresholds start at 128 KiB and grow only as large blocks
