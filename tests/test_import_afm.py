@@ -228,6 +228,41 @@ def test_replicates_are_named_as_the_contract_names_them_and_never_take_a_creeps
     assert _unused("v2", {"v2", *(f"v2{letter}" for letter in "bcdefghijklmnopqrstuvwxyz")}) == "v2bb"
 
 
+class PlacedCurve:
+    """A real curve as afmformats gives it, recorded at ``speed`` at the place (x, y) [m]."""
+
+    def __init__(self, curve, x: float, y: float, speed: float, session: str):
+        self.curve, self.columns = curve, curve.columns
+        self.metadata = {key: curve.metadata[key] for key in curve.metadata}
+        self.metadata.update({"position x": x, "position y": y, "speed approach": speed, "session id": session})
+
+    def __getitem__(self, column):
+        return self.curve[column]
+
+
+@vendor
+@pytest.mark.parametrize(("apart", "session"), [(0.0, "A"), (2e-9, "A"), (16.7e-6, "A"), (0.0, "C")])
+def test_curves_of_one_set_recorded_at_different_places_are_said_to_be(tmp_path, monkeypatch, capsys, apart, session):
+    # A recording set is one spot: real PAAm curves of one file index from three places of two maps were
+    # "unexplained"; at one place a viscosity added was named. The set is written either way.
+    import afmformats
+
+    real = afmformats.load_data(AFM / "fmt-jpk-fd_spot3-0192.jpk-force")[0]
+    places = {"slow.jpk-force": (-1e-12, 16.7e-6, 5e-6, "A"), "fast.jpk-force": (0.0, 16.7e-6 - apart, 1.5e-5, session)}
+    placed = {name: [PlacedCurve(real, *place)] for name, place in places.items()}
+    read_as(monkeypatch, tmp_path, list(places), lambda path, meta_override=None: placed[path.name])
+    main([*places, "--out", str(tmp_path / "set"), *COMMON])
+    said, meta = capsys.readouterr().out, load_recordings(tmp_path / "set").meta
+    if apart < 1e-7 and session == "A":
+        assert "places" not in said and "places" not in meta.notes
+        assert meta.position == pytest.approx((0.0, 16.7e-6))
+    else:
+        where = f"fast.jpk-force at (0, {16.7 - apart * 1e6:g}) µm of session {session}"
+        note = f"the curves were recorded at 2 places (slow.jpk-force at (0, 16.7) µm of session A, {where}"
+        assert f"note: {note}" in said and note in meta.notes
+        assert meta.position is None
+
+
 class MapCurve:
     """A curve of a force map as afmformats gives it: the real curve's data under a spot's grid metadata."""
 

@@ -28,8 +28,10 @@ from __future__ import annotations
 import argparse
 import itertools
 import logging
+import math
 import string
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import afmformats
@@ -53,6 +55,8 @@ SUFFIX = {"hold": "h", "creep": "c"}  # of a curve's id, for what follows its ap
 # speed × duration, the piezo's "height" 54–65% of it on every JPK file in ../shared/data/afm); nanite and
 # JPK's own "Vertical Tip Position" use it too.
 HEIGHT = "height (measured)"
+# Positions closer than this [m] are one place: a map's spot repeats its position to ~1e-12 m, a stage's to ~10 nm.
+SAME_PLACE = 1e-7
 
 
 def load_datasets(path: Path, overrides: dict) -> list:
@@ -82,15 +86,38 @@ def load_datasets(path: Path, overrides: dict) -> list:
         quiet.setLevel(level)
 
 
-def curve_file(path: Path, speed: float | None, overrides: dict) -> tuple[pd.DataFrame, float, float, str]:
-    """``curve_rows`` of the curve in file ``path``; a file of several curves (a force map) is refused, never
-    read for its first alone."""
+def curve_file(path: Path, speed: float | None, overrides: dict) -> tuple[tuple, Place | None]:
+    """(``curve_rows`` of the curve in file ``path``, where it was recorded); a file of several curves (a force
+    map) is refused, never read for its first alone."""
     datasets = load_datasets(path, overrides)
     if len(datasets) > 1:
         mapped = all("grid index x" in data.metadata for data in datasets)
         fix = "import it with --map (a recording set per spot)" if mapped else "export its curves to files of one each"
         raise RecordingError(f"{path}: {len(datasets)} curves in one file; {fix}")
-    return curve_rows(datasets[0], str(path), speed)
+    return curve_rows(datasets[0], str(path), speed), Place.of(datasets[0].metadata)
+
+
+@dataclass(frozen=True)
+class Place:
+    """Where a file says its curve was recorded: a position [m] in the frame of its session (afmformats' dataset
+    identifier, JPK's map run: the speeds of one public map share it), which another session's need not share."""
+
+    x: float
+    y: float
+    session: str | None
+
+    @classmethod
+    def of(cls, md) -> Place | None:
+        if "position x" not in md or "position y" not in md:
+            return None
+        return cls(float(md["position x"]), float(md["position y"]), md["session id"] if "session id" in md else None)
+
+    def same(self, other: Place) -> bool:
+        return self.session == other.session and math.dist((self.x, self.y), (other.x, other.y)) <= SAME_PLACE
+
+    def words(self) -> str:
+        x, y = (f"{round(c * 1e6, 2) + 0.0:g}" for c in (self.x, self.y))  # + 0.0: no "-0"
+        return f"({x}, {y}) µm" + (f" of session {self.session}" if self.session else "")
 
 
 def curve_rows(data, label: str, speed: float | None) -> tuple[pd.DataFrame, float, float, str]:
@@ -152,9 +179,35 @@ def curve_rows(data, label: str, speed: float | None) -> tuple[pd.DataFrame, flo
 
 
 def import_files(files: list[Path], out: Path, meta: dict, speed: float | None, overrides: dict) -> str:
-    """One recording set in ``out``, a curve per file; which file became which curve, in words."""
-    curves = {path.name: curve_file(path, speed, overrides) for path in files}
-    return write_set(out, curves, meta)
+    """One recording set in ``out``, a curve per file; which file became which curve, in words, and where the files
+    say their curves were recorded at different places, that (``places``)."""
+    read = {path.name: curve_file(path, speed, overrides) for path in files}
+    found = {name: place for name, (_, place) in read.items() if place is not None}
+    spread = places(found)
+    one = next(iter(found.values())) if found and not spread and len(found) == len(read) else None
+    curves = {name: rows for name, (rows, _) in read.items()}
+    return write_set(out, curves, meta, None if one is None else (one.x, one.y), spread)
+
+
+def places(found: dict[str, Place]) -> str:
+    """Where ``found`` ({file: where it was recorded}) holds more than one place (``SAME_PLACE`` apart, or another
+    session), what that does to a diagnosis and what to do, in words; else "". A recording set is one spot: a
+    stiffer or softer place reads as a rate effect between its curves (a null set's spots ±10% in stiffness leave
+    structure no term explains): public PAAm curves of one file index at three speeds, from three places of two
+    maps, were "unexplained" as recorded and with 3 Pa·s of viscosity added; at one place, 5 Pa·s added was named
+    with its size at 3 of 4 places."""
+    distinct: list[Place] = []
+    for place in found.values():
+        if not any(place.same(seen) for seen in distinct):
+            distinct.append(place)
+    if len(distinct) < 2:
+        return ""
+    listing = ", ".join(f"{name} at {place.words()}" for name, place in found.items())
+    return (
+        f"the curves were recorded at {len(distinct)} places ({listing}; another session's positions need not share "
+        "its frame): a recording set is one spot, and what differs between places (the sample's heterogeneity) reads "
+        "as structure no term explains; import the curves of one place together (--map for force-map files)"
+    )
 
 
 def import_maps(files: list[Path], out: Path, meta: dict, speed: float | None, overrides: dict) -> list[str]:
@@ -177,8 +230,8 @@ def import_maps(files: list[Path], out: Path, meta: dict, speed: float | None, o
                 spots.setdefault(key, {})[label] = curve_rows(data, label, speed)
             except RecordingError as error:
                 failures.append(str(error))
-            has_position = "position x" in md and "position y" in md
-            positions[key] = (float(md["position x"]), float(md["position y"])) if has_position else None
+            place = Place.of(md)
+            positions[key] = None if place is None else (place.x, place.y)
     for (column, row), curves in sorted(spots.items()):
         try:
             write_set(out / f"spot_{row:03d}_{column:03d}", curves, meta, positions[(column, row)])
@@ -195,10 +248,12 @@ def _unused(curve: str, taken: set[str]) -> str:
     return next(i for i in ids if i not in taken)
 
 
-def write_set(out: Path, curves: dict[str, tuple], meta: dict, position: tuple[float, float] | None = None) -> str:
+def write_set(
+    out: Path, curves: dict[str, tuple], meta: dict, position: tuple[float, float] | None = None, caveat: str = ""
+) -> str:
     """Write the recording set of ``curves`` ({source: ``curve_rows``}) to ``out``, check it reads back, and
-    say which file became which curve and what was not written. A curve is named by its speed and what
-    follows its approach: v20h (a hold), v10c (a creep)."""
+    say which file became which curve and what was not written (and ``caveat``, in meta.yaml's notes too). A curve
+    is named by its speed and what follows its approach: v20h (a hold), v10c (a creep)."""
     frames, springs, notes = [], {}, []
     for source, (rows, base_speed, spring_constant, left) in curves.items():
         after = [SUFFIX[kind] for kind in dict.fromkeys(rows["segment"]) if kind in SUFFIX]
@@ -218,14 +273,14 @@ def write_set(out: Path, curves: dict[str, tuple], meta: dict, position: tuple[f
             spring_constant=next(iter(springs.values())),
             reference_curve=slowest,
             contact_point="estimate",
-            notes="imported with ptwin.data.import_afm: " + "; ".join(notes),
+            notes="imported with ptwin.data.import_afm: " + "; ".join([*notes, *([caveat] if caveat else [])]),
             position=position,
             **meta,
         ),
         pd.concat(frames, ignore_index=True),
     )
     load_recordings(out)  # what was written must be a valid set: say so now, not at the first fit
-    return "; ".join(notes)
+    return "; ".join(notes) + (f"\nnote: {caveat}" if caveat else "")
 
 
 def main(argv: list[str] | None = None) -> None:
