@@ -9,7 +9,7 @@ import pytest
 from ptwin.data.import_afm import _unused, main
 from ptwin.data.recordings import load_recordings
 from ptwin.pipeline.prepare import UnsupportedSet
-from tests.conftest import run
+from tests.conftest import OPEN_DATA, needs_open_data, run
 
 AFM = Path(__file__).resolve().parents[2] / "shared" / "data" / "afm"
 # Only the tests that read those files skip without them: the others build afmformats' datasets themselves.
@@ -261,6 +261,22 @@ def test_curves_of_one_set_recorded_at_different_places_are_said_to_be(tmp_path,
         note = f"the curves were recorded at 2 places (slow.jpk-force at (0, 16.7) µm of session A, {where}"
         assert f"note: {note}" in said and note in meta.notes
         assert meta.position is None
+
+
+@needs_open_data("PAAM hydrogel")
+def test_public_curves_of_one_file_index_at_three_speeds_are_said_to_come_from_places_of_two_maps(tmp_path, capsys):
+    # Abuhattum et al. 2022's PAAm curves: one file index (4nN_1) at 5, 10 and 15 µm/s is three places of two
+    # maps (sessions …00383 and …00311); 4nN at 5 and 10 µm/s is one place of one map.
+    folder = OPEN_DATA / "PAAM hydrogel"
+    mixed = [folder / f"speed {v}" / f"PAA_speed {v}_4nN_1.tab" for v in (5, 10, 15)]
+    main([*map(str, mixed), "--out", str(tmp_path / "mixed"), "--probe-radius", "5e-6", *COMMON[2:]])
+    said = capsys.readouterr().out
+    assert "note: the curves were recorded at 3 places (PAA_speed 5_4nN_1.tab at (0, 16.67) µm of session" in said
+    assert load_recordings(tmp_path / "mixed").meta.position is None
+    one = [folder / f"speed {v}" / f"PAA_speed {v}_4nN.tab" for v in (5, 10)]
+    main([*map(str, one), "--out", str(tmp_path / "one"), "--probe-radius", "5e-6", *COMMON[2:]])
+    assert "places" not in capsys.readouterr().out
+    assert load_recordings(tmp_path / "one").meta.position == pytest.approx((-16.67e-6, -16.67e-6), abs=0.01e-6)
 
 
 class MapCurve:
