@@ -342,6 +342,8 @@ def test_values_that_do_not_match_the_terms_parameters_are_refused_in_one_line()
     assert InjectSettings("solid_relaxation", [0.2, 0.1]).scaled(2.0) == {"g": 0.4, "tau": 0.1}
     with pytest.raises(ValueError, match=r"inject.values of solid_relaxation are its parameters in the order"):
         InjectSettings("solid_relaxation", [5.0])
+    with pytest.raises(ValueError, match=r"inject.term contact_offset cannot be added: a contact offset moves where"):
+        InjectSettings("contact_offset", [1e-7])
 
 
 def test_each_terms_sizes_are_read_off_its_added_force_weak_to_strong(default_set, coarse_cache):
@@ -463,16 +465,21 @@ def test_a_term_whose_sizes_stop_short_of_the_ladder_says_where_its_peak_stays()
 
 @pytest.mark.slow
 def test_the_detection_limit_of_every_candidate_term_is_in_the_report(default_set, tmp_path, coarse_cache):
-    settings = inject_settings(default_set, coarse_cache, "inject.term=all", "diagnosis.terms=[solid_viscosity]")
+    # A contact offset is a candidate at known contacts, but no force added stands for it (``NOT_INJECTED``): added
+    # to bench-set p01 its fit found the size, the offset's own check rejected it, and another term was named.
+    terms = "diagnosis.terms=[solid_viscosity,contact_offset]"
+    settings = inject_settings(default_set, coarse_cache, "inject.term=all", terms)
     lines = []
     found = detection_limits(settings, tmp_path / "run", progress=lines.append)
     trials = found["solid_viscosity"]
     assert trials[-1].confidence and all(not t.confidence for t in trials[:-1])  # up the ladder until named
     assert trials[-1].found == pytest.approx(trials[-1].added, rel=0.4)
-    assert len(lines) == 1 + len(trials)  # a line as each size is diagnosed
+    assert found["contact_offset"] == [] and lines[-1].startswith("  [2/2] contact_offset: not added: a contact offset")
+    assert len(lines) == 2 + len(trials)  # a line as each size is diagnosed, and one for the term not added
     report = (tmp_path / "run" / "as-recorded" / "report.md").read_text()
     assert "## What these recordings could have shown" in report
     assert f"| `solid_viscosity` | gamma {trials[-1].added:.3g} Pa s |" in report
+    assert "| `contact_offset` | not added: a contact offset moves where the recorded force starts" in report
 
 
 def test_a_drag_free_offsets_remove_is_said_to_be_no_candidate_and_becomes_no_other_term(tmp_path, coarse_cache):

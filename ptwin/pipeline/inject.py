@@ -17,10 +17,8 @@ to the recorded force; z, time and the noise stay as recorded, and the depth fol
 Limits. First order: where δF changes the depth enough to change ΔF or s (δF/k_c not small against
 the depth over which they vary) the term is added approximately. The term adds to whatever the
 recordings hold already, so each size is read against the diagnosis of the recordings as they are.
-It is added on the base model's K, even where the data do not fix K. A contact offset is added as the force it
-changes in contact: the recorded onset stays where it was, and the term's own check reads a fitted offset against
-it (bench-set p01 with 147 nm added: "delta = 147 nm puts the contact where the recording pushes 3.48 nN", rejected),
-so on a set whose contacts are known its ladder can read "not named" at every size.
+It is added on the base model's K, even where the data do not fix K. A term no force added can stand for
+(``Term.NOT_INJECTED``: a contact offset, which moves where the recorded force starts) is not added.
 """
 
 from __future__ import annotations
@@ -285,10 +283,13 @@ def detection_limits(
     terms = candidate_settings(prepared, settings)[0].terms
     found, native, already = {}, {}, set()
     for i, term in enumerate(terms, start=1):
+        found[term] = []
+        if VOCABULARY[term].NOT_INJECTED:
+            progress(f"  [{i}/{len(terms)}] {term}: not added: {VOCABULARY[term].NOT_INJECTED}")
+            continue
         strength = VOCABULARY[term].strength()
         recorded = _trial(0.0, None, 0.0, as_recorded, term, strength)
         native[term] = native_strength(prepared, term, settings.optim.physics_fit.iterations, base_fit, recorded)
-        found[term] = []
         if recorded.confidence:  # every size would be named: the ladder would read the recordings, not the size
             already.add(term)
             held = f"{strength} {recorded.found_words()}"
@@ -428,6 +429,9 @@ def limits_section(found: dict[str, list[Trial]], native: dict[str, Own], alread
         strength = VOCABULARY[term].strength()
         if term in already:
             lines.append(f"| `{term}` | {ALREADY} ({native[term].fitted()}): not added | – | – | – |")
+            continue
+        if VOCABULARY[term].NOT_INJECTED:
+            lines.append(f"| `{term}` | not added: {VOCABULARY[term].NOT_INJECTED} | – | – | – |")
             continue
         if not trials:
             lines.append(f"| `{term}` | {_reach(LADDER[0], strength)}: not added | – | – | – |")

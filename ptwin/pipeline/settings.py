@@ -154,6 +154,8 @@ class InjectSettings:
                 f"inject.term {self.term!r} is not in the vocabulary; pick one of {', '.join(VOCABULARY)}, or "
                 f"{EVERY_TERM} for each"
             )
+        if VOCABULARY[self.term].NOT_INJECTED:
+            raise ValueError(f"inject.term {self.term} cannot be added: {VOCABULARY[self.term].NOT_INJECTED}")
         names = list(VOCABULARY[self.term].PARAMS)
         if len(self.values) != len(names):
             raise ValueError(
