@@ -315,8 +315,8 @@ def test_a_viscosity_added_to_a_real_paam_spot_is_named_with_its_size(tmp_path):
 def test_a_viscosity_added_to_a_real_agarose_spot_is_fitted_with_its_size_but_not_named_beside_curves_own_misfit(
     tmp_path,
 ):
-    # Real agarose (Abuhattum et al. 2022), five curves at 5, 10 and 15 µm/s at one position of two map sessions
-    # (import_afm says so: two places): the recordings as they are leave structure no term explains. With 5 Pa·s added
+    # Real agarose (Abuhattum et al. 2022), five curves at 5, 10 and 15 µm/s at one position of three map sessions
+    # (import_afm says so: three places): the recordings as they are leave structure no term explains. With 5 Pa·s added
     # the viscosity fitted alone finds its size (4.76 over the recordings' own 0.61). From stop 75 (the removed
     # baselines' line errors fitted) to stop 76 it was named weak beside that structure, but it predicted the curves
     # left out of the fit 1.16× worse (1.03× better read less the baselines' lines) and the test samples 0.99× as well
