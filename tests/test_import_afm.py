@@ -254,13 +254,37 @@ def test_curves_of_one_set_recorded_at_different_places_are_said_to_be(tmp_path,
     main([*places, "--out", str(tmp_path / "set"), *COMMON])
     said, meta = capsys.readouterr().out, load_recordings(tmp_path / "set").meta
     if apart < 1e-7 and session == "A":
-        assert "places" not in said and "places" not in meta.notes
+        assert "places" not in said and "places" not in meta.notes and meta.places() is None
         assert meta.position == pytest.approx((0.0, 16.7e-6))
     else:
         where = f"fast.jpk-force at (0, {16.7 - apart * 1e6:g}) µm of session {session}"
         note = f"the curves were recorded at 2 places (slow.jpk-force at (0, 16.7) µm of session A, {where}"
         assert f"note: {note}" in said and note in meta.notes
+        assert meta.places().startswith(note) and meta.places().endswith("(--map for force-map files)")
         assert meta.position is None
+
+
+def test_a_set_the_import_said_pools_places_says_so_in_its_report(tmp_path, coarse_cache):
+    # The import's note reaches the run's notes (report.md), where a user reads "unexplained" beside it.
+    from dataclasses import replace
+
+    from ptwin.data.recordings import write_recordings
+    from ptwin.pipeline.prepare import prepare
+    from tests.conftest import settings_for, simulated_set
+
+    folder = simulated_set(tmp_path / "set")
+    recordings = load_recordings(folder)
+    pooled = "the curves were recorded at 2 places (a at (0, 0) µm, b at (0, 16.7) µm): a recording set is one spot"
+    write_recordings(
+        folder,
+        replace(recordings.meta, notes=f"imported with ptwin.data.import_afm: a as v5; {pooled}"),
+        recordings.curves,
+    )
+    prepared = prepare(settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda _: None)
+    assert f"The import said {pooled}." in prepared.notes
+    write_recordings(folder, recordings.meta, recordings.curves)
+    prepared = prepare(settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda _: None)
+    assert not any("The import said" in note for note in prepared.notes)
 
 
 @needs_open_data("PAAM hydrogel")

@@ -40,7 +40,7 @@ import pandas as pd
 
 from ptwin.data import jpk_text
 from ptwin.data.contact import NoBaseline, estimate_baseline
-from ptwin.data.recordings import Meta, RecordingError, load_recordings, write_recordings
+from ptwin.data.recordings import PLACES, Meta, RecordingError, load_recordings, write_recordings
 
 # What each segment of a curve is, by the imaging mode afmformats reads from the file (its segment order):
 # a stress relaxation's leading pause at constant height is baseline, not the approach.
@@ -204,7 +204,7 @@ def places(found: dict[str, Place]) -> str:
         return ""
     listing = ", ".join(f"{name} at {place.words()}" for name, place in found.items())
     return (
-        f"the curves were recorded at {len(distinct)} places ({listing}; another session's positions need not share "
+        f"{PLACES}{len(distinct)} places ({listing}; another session's positions need not share "
         "its frame): a recording set is one spot, and what differs between places (the sample's heterogeneity) reads "
         "as structure no term explains; import the curves of one place together (--map for force-map files)"
     )

@@ -32,6 +32,9 @@ SPEED_RULE = {
     "retract": "< 0 (out of it)",
 }
 MIN_SAMPLES = 20
+# How an import's note in meta.yaml begins where its curves were recorded at several places (``import_afm.places``);
+# a run repeats that note in its report (``Meta.places``).
+PLACES = "the curves were recorded at "
 # Samples in a row at exactly the largest force of the approach and hold: a deflection past the detector's range
 # reads as its last value, and no sample holds its force to the last digit while it is pressed.
 SATURATED = 10
@@ -57,6 +60,11 @@ class Meta:
     noise_std: float | None = None  # [N]
     notes: str = ""
     position: tuple[float, float] | None = None  # (x, y) [m]: the spot's place in a force map
+
+    def places(self) -> str | None:
+        """The import's note that these curves were recorded at several places (``PLACES`` on), else None."""
+        start = self.notes.find(PLACES)
+        return self.notes[start:] if start >= 0 else None
 
 
 @dataclass

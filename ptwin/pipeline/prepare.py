@@ -173,7 +173,8 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     )
     rate = rate_effect(curves, reference)
     held = relaxations(curves)
-    evidence = (_spot_note(curves), drag_from_baselines(curves), rate.sentence() if rate else None)
+    pooled_places = f"The import said {meta.places()}." if meta.places() else None
+    evidence = (pooled_places, _spot_note(curves), drag_from_baselines(curves), rate.sentence() if rate else None)
     notes += [sentence for sentence in evidence if sentence] + [r.sentence() for r in held]
     return Prepared(recordings, curves, basis, samples, split, factory, noise, fitted, notes, rate, held)
 
