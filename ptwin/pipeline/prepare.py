@@ -173,8 +173,13 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     )
     rate = rate_effect(curves, reference)
     held = relaxations(curves)
-    pooled_places = f"The import said {meta.places()}." if meta.places() else None
-    evidence = (pooled_places, _spot_note(curves), drag_from_baselines(curves), rate.sentence() if rate else None)
+    places = meta.places()
+    evidence = (
+        f"The import said {places}." if places else None,
+        _spot_note(curves),
+        drag_from_baselines(curves),
+        rate.sentence() if rate else None,
+    )
     notes += [sentence for sentence in evidence if sentence] + [r.sentence() for r in held]
     return Prepared(recordings, curves, basis, samples, split, factory, noise, fitted, notes, rate, held)
 
