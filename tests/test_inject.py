@@ -280,9 +280,10 @@ def test_a_viscosity_added_to_real_noise_is_named(tmp_path, coarse_cache):
     assert trials[-1].confidence  # 63× the noise at its peak
 
 
-def viscosity_added_to_real_curves(tmp_path: Path, material: str, files: list[str]) -> tuple:
-    """(as recorded, 5 Pa·s added) ``Trial``s of the real curves ``files`` ('speed 5/<name>.tab', under
-    open_data/``material``), imported as one recording set, with the default basis and the whole chain."""
+def viscosity_added_to_real_curves(tmp_path: Path, material: str, files: list[str], size: float = 1.0) -> tuple:
+    """(as recorded, ``size`` × 5 Pa·s added) ``Trial``s of the real curves ``files`` ('speed 5/<name>.tab', under
+    open_data/``material``), imported as one recording set, with the default basis and the whole chain (its runs
+    under ``tmp_path``/run)."""
     from ptwin.data.import_afm import main as import_afm
 
     recordings = tmp_path / "recordings"
@@ -292,7 +293,8 @@ def viscosity_added_to_real_curves(tmp_path: Path, material: str, files: list[st
     )
     register()
     with initialize_config_dir(config_dir=str(CONFIGS), version_base="1.3"):
-        cfg = compose("inject", [f"data.path={recordings}", f"cache_dir={tmp_path / 'cache'}", "inject.sizes=[1.0]"])
+        overrides = [f"data.path={recordings}", f"cache_dir={tmp_path / 'cache'}", f"inject.sizes=[{size}]"]
+        cfg = compose("inject", overrides)
     return detection(typed(cfg), tmp_path / "run", progress=lambda _: None)
 
 
@@ -334,6 +336,24 @@ def test_a_viscosity_added_to_a_real_agarose_spot_is_fitted_with_its_size_but_no
     assert added.unexplained and not added.confidence
     assert added.alone - own == pytest.approx(5.0, rel=0.4)
     assert any("on curves left out of the fit solid_viscosity predicts" in why for why in added.why)
+
+
+@pytest.mark.slow
+@needs_open_data("Agarose")
+def test_a_viscosity_added_to_one_real_agarose_place_is_named_with_its_size_and_predicts_the_test_samples(tmp_path):
+    # Real agarose (Abuhattum et al. 2022): the curves at 5, 10 and 15 µm/s of one position of one map session,
+    # 10 Pa·s added (65× the noise at its peak). As recorded nothing is named (γ fitted alone −4.1, not physical);
+    # with the viscosity added it is named with its size (9.6) and the corrected model predicts the test samples
+    # better than the base model (1.49e-11 against 2.12e-11 N), the issue's "done" on a place of a material
+    # nothing was tuned on. With 5 Pa·s the base model's fluid force, K from 6.7e-11 to 6.9e-16 m², predicts
+    # them to the noise (1.53e-11 N, the noise std 1.59e-11): the data cannot name a term there.
+    files = ["speed 5/Agarose_speed 5_2nN_3.tab", "speed 10/Agarose_speed 10_2nN-1.tab"]
+    files += ["speed 15/Agarose_speed 15_2nN-3.tab"]
+    as_recorded, added = viscosity_added_to_real_curves(tmp_path, "Agarose", files, size=2.0)
+    assert not as_recorded.confidence
+    assert added.confidence and added.found - max(as_recorded.alone, 0.0) == pytest.approx(10.0, rel=0.4)
+    fit = json.loads((tmp_path / "run" / "size-2" / "run" / "diagnosis.json").read_text())["fit"]
+    assert fit["corrected"]["test_rmse"] < fit["base"]["test_rmse"]
 
 
 def test_values_that_do_not_match_the_terms_parameters_are_refused_in_one_line():
