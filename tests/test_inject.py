@@ -344,8 +344,8 @@ def test_a_viscosity_added_to_one_real_agarose_place_is_named_with_its_size_and_
     # Real agarose (Abuhattum et al. 2022): the curves at 5, 10 and 15 µm/s of one position of one map session,
     # 10 Pa·s added (65× the noise at its peak). As recorded nothing is named (γ fitted alone −4.1, not physical);
     # with the viscosity added it is named with its size (9.6) and the corrected model predicts the test samples
-    # better than the base model (1.49e-11 against 2.12e-11 N), the issue's "done" on a place of a material
-    # nothing was tuned on. With 5 Pa·s the base model's fluid force, K from 6.7e-11 to 6.9e-16 m², predicts
+    # better than the base model (1.49e-11 against 2.12e-11 N): what issue 26 asks of a few Pa·s, here of 10, on a
+    # place nothing was tuned on. With 5 Pa·s the base model's fluid force, K from 6.7e-11 to 6.9e-16 m², predicts
     # them to the noise (1.53e-11 N, the noise std 1.59e-11): the data cannot name a term there.
     files = ["speed 5/Agarose_speed 5_2nN_3.tab", "speed 10/Agarose_speed 10_2nN-1.tab"]
     files += ["speed 15/Agarose_speed 15_2nN-3.tab"]
