@@ -228,16 +228,22 @@ def test_replicates_are_named_as_the_contract_names_them_and_never_take_a_creeps
     assert _unused("v2", {"v2", *(f"v2{letter}" for letter in "bcdefghijklmnopqrstuvwxyz")}) == "v2bb"
 
 
-class PlacedCurve:
-    """A real curve as afmformats gives it, recorded at ``speed`` at the place (x, y) [m]."""
+class Relabelled:
+    """A real curve as afmformats gives it, under its file's metadata updated by ``extra``."""
 
-    def __init__(self, curve, x: float, y: float, speed: float, session: str):
+    def __init__(self, curve, extra: dict):
         self.curve, self.columns = curve, curve.columns
-        self.metadata = {key: curve.metadata[key] for key in curve.metadata}
-        self.metadata.update({"position x": x, "position y": y, "speed approach": speed, "session id": session})
+        self.metadata = {key: curve.metadata[key] for key in curve.metadata} | extra
 
     def __getitem__(self, column):
         return self.curve[column]
+
+
+class PlacedCurve(Relabelled):
+    """A real curve recorded at ``speed`` at the place (x, y) [m] of map session ``session``."""
+
+    def __init__(self, curve, x: float, y: float, speed: float, session: str):
+        super().__init__(curve, {"position x": x, "position y": y, "speed approach": speed, "session id": session})
 
 
 @vendor
@@ -303,17 +309,12 @@ def test_public_curves_of_one_file_index_at_three_speeds_are_said_to_come_from_p
     assert load_recordings(tmp_path / "one").meta.position == pytest.approx((-16.67e-6, -16.67e-6), abs=0.01e-6)
 
 
-class MapCurve:
+class MapCurve(Relabelled):
     """A curve of a force map as afmformats gives it: the real curve's data under a spot's grid metadata."""
 
     def __init__(self, curve, column: int, row: int, speed: float):
-        self.curve, self.columns = curve, curve.columns
-        self.metadata = {key: curve.metadata[key] for key in curve.metadata}
         grid = {"grid index x": column, "grid index y": row, "position x": 2e-6 * column, "position y": 2e-6 * row}
-        self.metadata.update(grid, **{"speed approach": speed})
-
-    def __getitem__(self, column):
-        return self.curve[column]
+        super().__init__(curve, grid | {"speed approach": speed})
 
 
 @vendor
