@@ -17,13 +17,10 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from ptwin.app import freeze_imports, one_line_errors, register, typed
-from ptwin.heap import keep_heap
+from ptwin.app import one_line_errors, start, typed
 from ptwin.pipeline.run import run
 
-register()
-freeze_imports()
-keep_heap()
+start()
 
 
 @hydra.main(version_base="1.3", config_path="configs", config_name="train")

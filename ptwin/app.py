@@ -20,6 +20,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from ptwin.data.recordings import RecordingError
 from ptwin.files import StoredFileError
+from ptwin.heap import keep_heap
 from ptwin.pgd.config import PGDConfig
 from ptwin.pipeline.engine import EngineError
 from ptwin.pipeline.settings import InjectRunSettings, MapRunSettings, Settings
@@ -48,11 +49,16 @@ def register() -> None:
     store.store(name="pgd_build_schema", node=BuildSettings)
 
 
-def freeze_imports() -> None:
-    """Leave what the imports made (torch's, matplotlib's, pandas' objects) out of every later garbage
-    collection (``gc.freeze``); a face calls it once its imports are done. The run's full collections and the
-    one at exit walked them all: 1.0 s of the demo's 7.3 s. What the run makes is collected as usual."""
+def start(heap: bool = True) -> None:
+    """What a face does once its imports are done: its schemas registered (``register``); what the imports made
+    (torch's, matplotlib's, pandas' objects) left out of every later garbage collection (``gc.freeze``: the
+    run's full collections and the one at exit walked them all, 1.0 s of the demo's 7.3 s; what the run makes is
+    collected as usual); and, with ``heap``, glibc's heap kept for the tensors its fits make and drop
+    (``ptwin.heap``; a map's face fits nothing itself: each of its spots keeps its own, ``pipeline.engine``)."""
+    register()
     gc.freeze()
+    if heap:
+        keep_heap()
 
 
 def typed(cfg: DictConfig):
