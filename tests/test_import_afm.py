@@ -216,6 +216,27 @@ def test_files_of_different_cantilevers_are_refused(tmp_path, capsys):
     assert not (tmp_path / "set").exists()
 
 
+@vendor
+def test_a_set_that_fails_its_check_is_not_written_and_the_one_there_stays(tmp_path, capsys):
+    """A probe radius smaller than the curve's depth: refused in one line naming the row and the option to fix,
+    and nothing lands; a set imported there before reads as it did."""
+    file, out = str(AFM / "fmt-jpk-fd_spot3-0192.jpk-force"), tmp_path / "set"
+    main([file, "--out", str(out), *COMMON])
+    before = load_recordings(out).curves
+    capsys.readouterr()
+    small = ["--probe-radius", "5.0e-8", *COMMON[2:]]  # 50 nm: the curve goes 141 nm deep
+    with pytest.raises(SystemExit) as exit:
+        main([file, "--out", str(out), *small])
+    assert exit.value.code == 2
+    assert re.fullmatch(
+        rf"{re.escape(str(out))}: not written: curves\.csv: row \d+, curve 'v5': depth 1\.\d+e-07 m exceeds the probe "
+        r"radius 5e-08 m; .*the import's --probe-radius, --spring-constant, --thickness and --viscosity",
+        capsys.readouterr().err.strip(),
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["set"]
+    assert load_recordings(out).curves.equals(before)
+
+
 def test_replicates_are_named_as_the_contract_names_them_and_never_take_a_creeps_id():
     taken = set()
     for _ in range(3):

@@ -29,6 +29,8 @@ import argparse
 import itertools
 import logging
 import math
+import os
+import shutil
 import string
 import sys
 from dataclasses import dataclass
@@ -267,8 +269,12 @@ def write_set(
             f"spring constants differ ({listing}); a recording set is one cantilever: import them apart"
         )
     slowest = min(frames, key=lambda frame: frame["base_speed"].iloc[0])["curve"].iloc[0]
+    # Written beside ``out`` and read back there first: a set that fails its check never lands (a map's spot
+    # folder left behind was run by the map as if imported), and a set already at ``out`` stays as it was.
+    staged = out.with_name(f".{out.name}.importing")
+    shutil.rmtree(staged, ignore_errors=True)
     write_recordings(
-        out,
+        staged,
         Meta(
             spring_constant=next(iter(springs.values())),
             reference_curve=slowest,
@@ -279,7 +285,18 @@ def write_set(
         ),
         pd.concat(frames, ignore_index=True),
     )
-    load_recordings(out)  # what was written must be a valid set: say so now, not at the first fit
+    try:
+        load_recordings(staged)
+    except RecordingError as error:
+        shutil.rmtree(staged)
+        raise RecordingError(
+            f"{out}: not written: {str(error).removeprefix(f'{staged}{os.sep}')}; meta.yaml's values come from the "
+            "import's --probe-radius, --spring-constant, --thickness and --viscosity"
+        ) from None
+    out.mkdir(parents=True, exist_ok=True)
+    for file in staged.iterdir():
+        file.replace(out / file.name)
+    staged.rmdir()
     return "; ".join(notes) + (f"\nnote: {caveat}" if caveat else "")
 
 
