@@ -3,6 +3,7 @@ gives K per spot and the term's region; a broken spot is a row, not a stop; Dask
 a killed map resumes; and the map's geometry (positions, regions) is read right."""
 
 import json
+import logging
 import shutil
 import subprocess
 import sys
@@ -15,6 +16,7 @@ from hydra import compose, initialize_config_dir
 from ptwin.app import register, typed
 from ptwin.data.recordings import RecordingError, load_recordings
 from ptwin.diagnosis.spatial import regions
+from ptwin.pipeline.engine import LOCAL, run_each
 from ptwin.pipeline.forcemap import run_map
 from ptwin.synth.cli import main as synth
 from tests.conftest import CONFIGS
@@ -157,6 +159,16 @@ def test_dask_with_two_workers_gives_the_serial_table(serial_map, generated_map,
     serial = result.table.set_index("spot").loc[picked].reset_index()
     columns = [c for c in dask.columns if c != "seconds"]  # wall time is the one thing that may differ
     pd.testing.assert_frame_equal(dask[columns], serial[columns])
+
+
+def test_dask_says_only_its_warnings_while_a_map_runs_and_its_levels_come_back():
+    """Dask's INFO lines (a scheduler starting, nannies, connections) broke into a map's progress bar."""
+    each = run_each(abs, [-1, -2], LOCAL, workers=1)
+    first = next(each)  # the cluster is up
+    assert logging.getLogger("distributed.scheduler").getEffectiveLevel() == logging.WARNING
+    assert logging.getLogger("distributed.nanny").getEffectiveLevel() == logging.WARNING
+    assert dict([first, *each]) == {-1: 1, -2: 2}
+    assert logging.getLogger("distributed").getEffectiveLevel() == logging.INFO  # distributed's own, as it set it
 
 
 @pytest.mark.parametrize(

@@ -9,8 +9,10 @@ after its first spot (``ptwin.pgd.cache``).
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from functools import partial
 
 from ptwin.heap import keep_heap
@@ -39,37 +41,60 @@ def run_each(
         for item in items:
             yield item, _single_threaded(function, item)
         return
-    import dask  # only maps import Dask
-    from distributed import Client, LocalCluster, as_completed
+    yield from _on_dask(function, items, scheduler, workers, failed)
 
-    if scheduler == LOCAL:
-        # No dashboard shows the workers' statistical profiles, whose sampler takes the GIL every 10 ms.
-        with dask.config.set({"distributed.worker.profile.enabled": False}):
-            cluster = LocalCluster(
-                n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True, dashboard_address=None
-            )
-        client = Client(cluster)
-    else:
-        try:
-            cluster, client = None, Client(scheduler, timeout=CONNECT_SECONDS)
-        except (OSError, ValueError, TypeError) as error:
-            raise EngineError(
-                f"map.scheduler={scheduler}: no Dask scheduler answers there ({str(error).splitlines()[0]}); start "
-                f"one (dask scheduler, dask-jobqueue) and give its address, or use map.scheduler=local"
-            ) from None
+
+@contextmanager
+def _dask_quiet() -> Iterator[None]:
+    """Dask's loggers at WARNING while a map runs on it: its INFO lines (a scheduler starting, nannies, connections:
+    some thirty a map, under a face's logging) broke into the progress bar and said nothing a user acts on; its
+    warnings and errors still show."""
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    logger.setLevel(max(logger.getEffectiveLevel(), logging.WARNING))
     try:
-        task = partial(_single_threaded, function)
-        futures = client.map(task, list(items), pure=False)
-        item_of = {future.key: item for future, item in zip(futures, items)}
-        for future in as_completed(futures):
-            item = item_of[future.key]
-            try:
-                yield item, future.result()
-            except Exception as error:
-                if failed is None:
-                    raise
-                yield item, failed(item, error)
+        yield
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        logger.setLevel(level)
+
+
+def _on_dask(function: Callable, items: Sequence, scheduler: str, workers: int, failed: Callable | None):
+    """``run_each`` on Dask: a ``LocalCluster`` of this machine's cores, or the scheduler at ``scheduler``."""
+    import dask  # only maps import Dask
+    from distributed import Client, LocalCluster, as_completed  # its import sets its loggers' levels: quieted after
+
+    with _dask_quiet():
+        if scheduler == LOCAL:
+            # No dashboard shows the workers' statistical profiles, whose sampler takes the GIL every 10 ms.
+            with dask.config.set({"distributed.worker.profile.enabled": False}):
+                cluster = LocalCluster(
+                    n_workers=workers or os.cpu_count() or 1,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=None,
+                )
+            client = Client(cluster)
+        else:
+            try:
+                cluster, client = None, Client(scheduler, timeout=CONNECT_SECONDS)
+            except (OSError, ValueError, TypeError) as error:
+                raise EngineError(
+                    f"map.scheduler={scheduler}: no Dask scheduler answers there ({str(error).splitlines()[0]}); "
+                    f"start one (dask scheduler, dask-jobqueue) and give its address, or use map.scheduler=local"
+                ) from None
+        try:
+            task = partial(_single_threaded, function)
+            futures = client.map(task, list(items), pure=False)
+            item_of = {future.key: item for future, item in zip(futures, items)}
+            for future in as_completed(futures):
+                item = item_of[future.key]
+                try:
+                    yield item, future.result()
+                except Exception as error:
+                    if failed is None:
+                        raise
+                    yield item, failed(item, error)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
