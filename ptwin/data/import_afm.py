@@ -271,7 +271,8 @@ def write_set(
     slowest = min(frames, key=lambda frame: frame["base_speed"].iloc[0])["curve"].iloc[0]
     # Written beside ``out`` and read back there first: a set that fails its check never lands (a map's spot
     # folder left behind was run by the map as if imported), and a set already at ``out`` stays as it was.
-    staged = out.with_name(f".{out.name}.importing")
+    target = out.resolve()  # a name of its own, "." too
+    staged = target.with_name(f".{target.name}.importing")
     shutil.rmtree(staged, ignore_errors=True)
     write_recordings(
         staged,
