@@ -338,6 +338,11 @@ def test_a_viscosity_added_to_a_real_agarose_spot_is_fitted_with_its_size_but_no
     assert any("on curves left out of the fit solid_viscosity predicts" in why for why in added.why)
 
 
+# One position of one agarose map session (Abuhattum et al. 2022) at 5, 10 and 15 µm/s.
+AGAROSE_PLACE = ["speed 5/Agarose_speed 5_2nN_3.tab", "speed 10/Agarose_speed 10_2nN-1.tab"]
+AGAROSE_PLACE += ["speed 15/Agarose_speed 15_2nN-3.tab"]
+
+
 @pytest.mark.slow
 @needs_open_data("Agarose")
 def test_a_viscosity_added_to_one_real_agarose_place_is_named_with_its_size_and_predicts_the_test_samples(tmp_path):
@@ -347,9 +352,7 @@ def test_a_viscosity_added_to_one_real_agarose_place_is_named_with_its_size_and_
     # better than the base model (1.49e-11 against 2.12e-11 N): what issue 26 asks of a few Pa·s, here of 10, on a
     # place nothing was tuned on. With 5 Pa·s the base model's fluid force, K from 6.7e-11 to 6.9e-16 m², predicts
     # them to the noise (1.53e-11 N, the noise std 1.59e-11): the data cannot name a term there.
-    files = ["speed 5/Agarose_speed 5_2nN_3.tab", "speed 10/Agarose_speed 10_2nN-1.tab"]
-    files += ["speed 15/Agarose_speed 15_2nN-3.tab"]
-    as_recorded, added = viscosity_added_to_real_curves(tmp_path, "Agarose", files, size=2.0)
+    as_recorded, added = viscosity_added_to_real_curves(tmp_path, "Agarose", AGAROSE_PLACE, size=2.0)
     assert not as_recorded.confidence
     assert added.confidence and added.found - max(as_recorded.alone, 0.0) == pytest.approx(10.0, rel=0.4)
     fit = json.loads((tmp_path / "run" / "size-2" / "run" / "diagnosis.json").read_text())["fit"]
@@ -364,10 +367,8 @@ def test_a_strength_the_base_model_s_k_carries_is_given_an_interval_not_a_point_
     # out and the refits warm from there never came back, so every point read as closing the side: "gamma fitted
     # alone: 6.23e-10 (95%: 0 to 6.23e-10)", a bound the data never set. From the fit's own values too, the upper
     # side closes where the data put it (5.1 Pa·s, by hand, at 4.9 added).
-    files = ["speed 5/Agarose_speed 5_2nN_3.tab", "speed 10/Agarose_speed 10_2nN-1.tab"]
-    files += ["speed 15/Agarose_speed 15_2nN-3.tab"]
-    _, added = viscosity_added_to_real_curves(tmp_path, "Agarose", files, size=1.0)
-    low, high = added.alone_interval
+    _, added = viscosity_added_to_real_curves(tmp_path, "Agarose", AGAROSE_PLACE, size=1.0)
+    _, high = added.alone_interval
     assert added.alone < 1.0 and (high is None or high > 1.0)
 
 
