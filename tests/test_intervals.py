@@ -6,6 +6,7 @@ import pytest
 import torch
 from torch import nn
 
+from ptwin.diagnosis import intervals
 from ptwin.diagnosis.diagnose import _wald
 from ptwin.diagnosis.intervals import LEVEL, profile_interval, within
 from ptwin.diagnosis.words import bounded
@@ -64,6 +65,25 @@ def test_the_profile_of_a_linear_model_is_the_textbook_interval_times_the_noise_
     half = math.sqrt(LEVEL) * std
     assert low == pytest.approx(b - half, rel=1e-3)
     assert high == pytest.approx(b + half, rel=1e-3)
+
+
+@pytest.mark.parametrize("first, refits", [(0.5, 4), (2.0, 6)])
+def test_a_quadratic_profile_is_closed_at_its_second_point_a_side_from_a_first_step_off_its_end(
+    first, refits, monkeypatch
+):
+    # √Δχ² of a linear model is linear in the parameter: the line through 0 and the first point meets the end exactly.
+    # Stepping ×4 outward instead (0.5 std → 2 → back) took three points a side, the middle one far out. A point
+    # that closes warm from one farther out (2 std → 1) is refitted from the fit's own values too: up to six refits.
+    samples = line_samples()
+    fit, index = fitted_line(samples)
+    std = textbook_std(samples, fit)
+    points = []
+    lowest = intervals._lowest
+    monkeypatch.setattr(intervals, "_lowest", lambda settle, starts: points.append(starts[0]) or lowest(settle, starts))
+    low, high = profile_interval(fit, "b", first * std, samples, index)
+    b, half = fit.model.b.item(), math.sqrt(LEVEL) * std
+    assert (low, high) == pytest.approx((b - half, b + half), rel=1e-3)
+    assert len(points) <= refits
 
 
 def test_a_side_searched_past_a_point_ends_where_the_whole_profile_ends_or_at_that_point():

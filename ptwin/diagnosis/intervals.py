@@ -9,7 +9,8 @@ model says, as the Wald variance assumes too), and the interval is where it stay
 ≤ 3.84 (χ² with one degree of freedom). Each side is found on the
 raw parameter (log K, log M, log tau: asymmetric intervals where the data are) by
 regula falsi (Illinois) on √Δ − √3.84, which is nearly linear in θ, from the Wald step
-outward. A side the data do not close within ``REACH`` steps of ×4 is None: the
+outward (each outward point where the line through the last two meets zero). A side the data do not close
+within ``REACH`` steps of ×4 is None: the
 parameter is not bounded there. So is a side where the model stops being evaluable
 before the data close it (e.g. K so small that the Darcy force overflows): a failure of
 the model is no evidence against the parameter, and bisecting towards it would report the
@@ -33,6 +34,7 @@ from ptwin.physics.samples import Samples
 LEVEL = 3.841458820694124  # the 95% point of χ² with one degree of freedom
 REACH = 6  # outward steps (each ×4) before a side counts as open
 ITERATIONS = 8  # regula falsi steps per side
+TOLERANCE = 0.01 * math.sqrt(LEVEL)  # |excess| that counts as on the side
 REFIT = 40  # LM iterations of the other parameters at each profile point (as the fits run LM: ``physics_solver``)
 
 
@@ -62,7 +64,7 @@ def profile_interval(
     restarts = [{vector.entry(name): value for name, value in entries.items()} for entries in starts]
     contact = vector.entry("contact.reference") if extra else None
     others = [i for i in range(theta.numel()) if i != j]
-    warm: dict[str, torch.Tensor] = {}  # the others at the last profile point, each side starting from θ̂
+    warm: dict = {}  # the others at the last profile point and its offset, each side starting from θ̂
     reduced = fit.chi_square / max(fit.samples - theta.numel() + len(extra), 1)
     scale = samples.noise_inflation * max(1.0, reduced)
 
@@ -87,30 +89,31 @@ def profile_interval(
 
     def excess(offset: float) -> float:
         """√(Δχ²/κ²) − √3.84 with the parameter at θ̂ + offset, the others refitted (warm, and from each restart).
-        A point that would close the side is refitted from the fit's own others too: the warm start is the last
-        point's, and after a point far out (the first step, 1.96 Wald std of a parameter the curvature barely
-        fixes) LM's refit did not find its way back within its steps. Real agarose with 4.9 Pa·s added, gamma
-        fitted alone at 4.9e-5: every point read as closing and the interval came back as the fit's value itself,
-        4.91e-05 to 4.91e-05."""
+        A point that would close the side, warm from a point farther out, is refitted from the fit's own others
+        too: after a point far out (the first step, 1.96 Wald std of a parameter the curvature barely fixes) LM's
+        refit did not find its way back within its steps. Real agarose with 4.9 Pa·s added, gamma fitted alone at
+        4.9e-5: every point read as closing and the interval came back as the fit's value itself, 4.91e-05 to
+        4.91e-05."""
         start = theta.clone()
         start[others] = warm["others"]
         start[j] = theta[j] + offset
         best = _lowest(settled, [start, *(_moved(start, entries) for entries in restarts)])
-        if best is None or best[1] - fit.chi_square >= LEVEL * scale:
+        closing = best is None or best[1] - fit.chi_square >= LEVEL * scale
+        if closing and abs(warm["offset"]) > abs(offset):
             fresh = theta.clone()
             fresh[j] = theta[j] + offset
             best = min(filter(None, (best, _lowest(settled, [fresh]))), key=lambda pair: pair[1], default=None)
         if best is None:
             return math.inf
         full, chi_square = best
-        warm["others"] = full[others]
+        warm["others"], warm["offset"] = full[others], offset
         delta = max(chi_square - fit.chi_square, 0.0) / scale
         return math.sqrt(delta) - math.sqrt(LEVEL)
 
     step = raw_std if math.isfinite(raw_std) and raw_std > 0 else max(abs(theta[j].item()), 1.0) * 0.1
     sides = []
     for sign, point in zip((-1.0, 1.0), beyond):
-        warm["others"] = theta[others].clone()
+        warm["others"], warm["offset"] = theta[others].clone(), 0.0
         past = None if point is None or sign * (point - theta[j].item()) <= 0 else point - theta[j].item()
         end = _side(excess, sign * 1.96 * step, past)
         sides.append(None if end is None else theta[j].item() + end)
@@ -146,7 +149,10 @@ def within(interval: list[float | None], plausible: tuple[float, float]) -> list
 
 def _side(excess, first: float, past: float | None = None) -> float | None:
     """The offset where ``excess`` crosses zero, from 0 (where it is −√3.84) outward through ``first``; given an
-    offset ``past``, from there outward (×4), or ``past`` itself where ``excess`` is no longer negative there."""
+    offset ``past``, from there outward, or ``past`` itself where ``excess`` is no longer negative there. Outward,
+    each point is where the line through the last two crosses zero (``_outward``), so a profile close to its
+    quadratic is closed at its first or second point; the side is open where it has not closed by ``REACH``
+    steps of ×4."""
     inside, g_inside = 0.0, -math.sqrt(LEVEL)
     outside = first
     if past is not None:
@@ -158,20 +164,23 @@ def _side(excess, first: float, past: float | None = None) -> float | None:
         if g_past >= 0:
             return past
         inside, g_inside, outside = past, g_past, past * 4.0
-    for _ in range(REACH):
+    farthest = outside * 4.0 ** (REACH - 1)
+    while True:
         g_outside = excess(outside)
         if math.isinf(g_outside):  # the model broke down first: no evidence of a bound
             return None
+        if abs(g_outside) < TOLERANCE:
+            return outside
         if g_outside >= 0:
             break
-        inside, g_inside, outside = outside, g_outside, outside * 4.0
-    else:
-        return None
+        if abs(outside) >= abs(farthest):
+            return None
+        inside, g_inside, outside = outside, g_outside, _outward(inside, g_inside, outside, g_outside, farthest)
     side = 0
     for _ in range(ITERATIONS):
         point = inside - g_inside * (outside - inside) / (g_outside - g_inside)
         g = excess(point)
-        if abs(g) < 0.01 * math.sqrt(LEVEL):
+        if abs(g) < TOLERANCE:
             return point
         if math.isinf(g):
             return None
@@ -186,3 +195,13 @@ def _side(excess, first: float, past: float | None = None) -> float | None:
                 g_inside *= 0.5
             side = 1
     return 0.5 * (inside + outside)
+
+
+def _outward(inside: float, g_inside: float, outside: float, g_outside: float, farthest: float) -> float:
+    """The next offset past ``outside`` (both points still inside the interval): where the line through the two
+    crosses zero, at least 1.01 and at most 4 times ``outside``, and never past ``farthest``."""
+    ratio = 4.0
+    if g_outside > g_inside:
+        crossing = outside - g_outside * (outside - inside) / (g_outside - g_inside)
+        ratio = min(max(crossing / outside, 1.01), 4.0)
+    return outside * ratio if abs(outside * ratio) < abs(farthest) else farthest
