@@ -99,16 +99,19 @@ def test_the_networks_output_layer_starts_at_the_least_squares_optimum_of_the_tw
                 assert 0.5 * residual(moved).square().sum().item() > cost
 
 
-def test_a_singular_output_layer_at_no_regularisation_starts_at_its_least_norm_optimum(prepared):
-    # Two hidden units alike make the output layer's normal matrix singular at λ = 0: no traceback, the least-norm
-    # minimiser, which splits their weight evenly.
+@pytest.mark.parametrize("apart", [0.0, 1e-15])
+def test_a_singular_output_layer_at_no_regularisation_starts_at_its_least_norm_optimum(prepared, apart):
+    # Two hidden units alike (to rounding: ``apart``, relative) make the output layer's normal matrix singular at
+    # λ = 0: no traceback, the least-norm minimiser, which splits their weight evenly. An LU solve of the normal
+    # equations went through wherever rounding left them a hair apart, on one thread as a diagnosis runs even with
+    # the units equal: weights −550 and 0.
     _, p = prepared
     samples, train = p.samples, p.split.train
     twin = p.make_model.twin(3.0e-16, 3e-10, samples, train)
     hidden = twin.network.layers[0]
     with torch.no_grad():
         hidden.weight[1] = hidden.weight[0]
-        hidden.bias[1] = hidden.bias[0]
+        hidden.bias[1] = hidden.bias[0] * (1.0 + apart)
     twin.start_network(samples, train, 0.0)
     weight = twin.network.layers[2].weight[0]
     assert torch.isfinite(weight).all()

@@ -9,6 +9,7 @@ a learning rate per parameter group.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import torch
@@ -89,12 +90,14 @@ class ErrorNetwork(nn.Module):
             weight = (self.force_scale / samples.noise_floor[index])[:, None]
             design = torch.cat([h, torch.ones_like(h[:, :1])], 1) * weight
             target = error / samples.noise_floor[index]
+            # The ridge system as least squares on the design stacked over √λ·I, by SVD: at λ = 0 with hidden units
+            # that act alike (a rank-deficient design) it is the least-norm optimum. Solving the normal equations
+            # and falling back where LU said singular depended on rounding: with the BLAS on one thread the solve
+            # went through and put the whole weight on one of two equal units (−550 and 0).
             eye = torch.eye(design.shape[1], dtype=design.dtype, device=design.device)
-            normal = design.T @ design + regularisation * eye
-            try:
-                solution = torch.linalg.solve(normal, design.T @ target)
-            except RuntimeError:  # singular at λ = 0 (hidden units that act alike): the least-norm optimum
-                solution = torch.linalg.lstsq(design, target[:, None], driver="gelsd").solution[:, 0]
+            stacked = torch.cat([design, math.sqrt(regularisation) * eye])
+            padded = torch.cat([target, torch.zeros_like(eye[0])])
+            solution = torch.linalg.lstsq(stacked, padded[:, None], driver="gelsd").solution[:, 0]
             output.weight.copy_(solution[:-1][None, :])
             output.bias.copy_(solution[-1:])
 
