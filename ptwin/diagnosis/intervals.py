@@ -154,7 +154,7 @@ def _side(excess, first: float, past: float | None = None) -> float | None:
     quadratic is closed at its first or second point; the side is open where it has not closed by ``REACH``
     steps of ×4."""
     inside, g_inside = 0.0, -math.sqrt(LEVEL)
-    outside = first
+    outside, farthest = first, first * 4.0 ** (REACH - 1)
     if past is not None:
         if math.isinf(past):
             return None
@@ -163,8 +163,8 @@ def _side(excess, first: float, past: float | None = None) -> float | None:
             return None
         if g_past >= 0:
             return past
-        inside, g_inside, outside = past, g_past, past * 4.0
-    farthest = outside * 4.0 ** (REACH - 1)
+        farthest = past * 4.0**REACH
+        inside, g_inside, outside = past, g_past, _outward(inside, g_inside, past, g_past, farthest)
     while True:
         g_outside = excess(outside)
         if math.isinf(g_outside):  # the model broke down first: no evidence of a bound
