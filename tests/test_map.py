@@ -2,11 +2,14 @@
 gives K per spot and the term's region; a broken spot is a row, not a stop; Dask and serial runs agree;
 a killed map resumes; and the map's geometry (positions, regions) is read right."""
 
+import contextlib
 import json
 import logging
 import shutil
+import socket
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -169,6 +172,18 @@ def test_dask_says_only_its_warnings_while_a_map_runs_and_its_levels_come_back()
     assert logging.getLogger("distributed.nanny").getEffectiveLevel() == logging.WARNING
     assert dict([first, *each]) == {-1: 1, -2: 2}
     assert logging.getLogger("distributed").getEffectiveLevel() == logging.INFO  # distributed's own, as it set it
+
+
+def test_a_map_beside_another_cluster_says_nothing_of_ports():
+    """The scheduler's HTTP server took Dask's dashboard port 8787 with no dashboard asked for: a second map on the
+    machine (or a notebook's cluster) printed "Port 8787 is already in use" into the progress bar."""
+    with socket.socket() as taken, warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        with contextlib.suppress(OSError):  # held by something else already: as good
+            taken.bind(("", 8787))
+            taken.listen()
+        assert dict(run_each(abs, [-1], LOCAL, workers=1)) == {-1: 1}
+    assert not [str(w.message) for w in said if "8787" in str(w.message)]
 
 
 @pytest.mark.parametrize(

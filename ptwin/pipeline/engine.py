@@ -65,13 +65,16 @@ def _on_dask(function: Callable, items: Sequence, scheduler: str, workers: int, 
 
     with _dask_quiet():
         if scheduler == LOCAL:
-            # No dashboard shows the workers' statistical profiles, whose sampler takes the GIL every 10 ms.
+            # No dashboard shows the workers' statistical profiles, whose sampler takes the GIL every 10 ms. The
+            # scheduler's HTTP server (health, metrics) runs without one, on Dask's dashboard port 8787 unless told:
+            # a free port on this machine, so that a second map or a notebook's cluster is no "port in use" warning.
             with dask.config.set({"distributed.worker.profile.enabled": False}):
                 cluster = LocalCluster(
                     n_workers=workers or os.cpu_count() or 1,
                     threads_per_worker=1,
                     processes=True,
                     dashboard_address=None,
+                    scheduler_kwargs={"dashboard": False, "dashboard_address": "localhost:0"},
                 )
             client = Client(cluster)
         else:
