@@ -86,6 +86,21 @@ def test_a_quadratic_profile_is_closed_at_its_second_point_a_side_from_a_first_s
     assert len(points) <= refits
 
 
+def test_a_profile_flattening_out_just_below_the_level_is_open_and_a_steepening_one_closes_in_few_points():
+    # Outward points aim at the level along the line through the last two; one a hair short of it is no end.
+    def counted(excess):
+        points = []
+        return points, lambda offset: points.append(offset) or excess(offset)
+
+    points, flattening = counted(lambda x: -math.sqrt(LEVEL) + (math.sqrt(LEVEL) - 0.01) * (1 - math.exp(-x)))
+    assert intervals._side(flattening, 1.0) is None
+    assert max(points) == pytest.approx(4.0 ** (intervals.REACH - 1))
+    points, steepening = counted(lambda x: -math.sqrt(LEVEL) + (x / 50.0) ** 8)
+    end = intervals._side(steepening, 1.0)
+    assert end == pytest.approx(50.0 * math.sqrt(LEVEL) ** (1 / 8), rel=2e-3)  # within the excess tolerance
+    assert len(points) <= 2 * intervals.ITERATIONS
+
+
 def test_a_side_searched_past_a_point_ends_where_the_whole_profile_ends_or_at_that_point():
     # A model screened against an interval found already (``beyond``): where its profile reaches further, the side is
     # the whole profile's; where it closes before the point, the point (one refit); an open side is not searched.

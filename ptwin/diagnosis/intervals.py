@@ -9,7 +9,7 @@ model says, as the Wald variance assumes too), and the interval is where it stay
 ≤ 3.84 (χ² with one degree of freedom). Each side is found on the
 raw parameter (log K, log M, log tau: asymmetric intervals where the data are) by
 regula falsi (Illinois) on √Δ − √3.84, which is nearly linear in θ, from the Wald step
-outward (each outward point where the line through the last two meets zero). A side the data do not close
+outward (each outward point where the line through the last two meets the level). A side the data do not close
 within ``REACH`` steps of ×4 is None: the
 parameter is not bounded there. So is a side where the model stops being evaluable
 before the data close it (e.g. K so small that the Darcy force overflows): a failure of
@@ -23,6 +23,7 @@ relaxation doing nothing at its fit on a soft cantilever: M's lower end 6.29e3 P
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import torch
@@ -35,6 +36,7 @@ LEVEL = 3.841458820694124  # the 95% point of χ² with one degree of freedom
 REACH = 6  # outward steps (each ×4) before a side counts as open
 ITERATIONS = 8  # regula falsi steps per side
 TOLERANCE = 0.01 * math.sqrt(LEVEL)  # |excess| that counts as on the side
+PAST = 0.1 * TOLERANCE  # the excess an outward point aims at: just past the level, where it ends the side
 REFIT = 40  # LM iterations of the other parameters at each profile point (as the fits run LM: ``physics_solver``)
 
 
@@ -150,7 +152,7 @@ def within(interval: list[float | None], plausible: tuple[float, float]) -> list
 def _side(excess, first: float, past: float | None = None) -> float | None:
     """The offset where ``excess`` crosses zero, from 0 (where it is −√3.84) outward through ``first``; given an
     offset ``past``, from there outward, or ``past`` itself where ``excess`` is no longer negative there. Outward,
-    each point is where the line through the last two crosses zero (``_outward``), so a profile close to its
+    each point is where the line through the last two crosses the level (``_outward``), so a profile close to its
     quadratic is closed at its first or second point; the side is open where it has not closed by ``REACH``
     steps of ×4."""
     inside, g_inside = 0.0, -math.sqrt(LEVEL)
@@ -165,17 +167,18 @@ def _side(excess, first: float, past: float | None = None) -> float | None:
             return past
         farthest = past * 4.0**REACH
         inside, g_inside, outside = past, g_past, _outward(inside, g_inside, past, g_past, farthest)
-    while True:
+    for step in itertools.count():
         g_outside = excess(outside)
         if math.isinf(g_outside):  # the model broke down first: no evidence of a bound
             return None
-        if abs(g_outside) < TOLERANCE:
-            return outside
+        if 0 <= g_outside < TOLERANCE:  # just past the level: the end (just short of it is no end: a profile
+            return outside  # flattening out below the level closes nowhere)
         if g_outside >= 0:
             break
         if abs(outside) >= abs(farthest):
             return None
-        inside, g_inside, outside = outside, g_outside, _outward(inside, g_inside, outside, g_outside, farthest)
+        secant = step < ITERATIONS  # then ×4: a profile steepening ever faster never crawls out in small steps
+        inside, g_inside, outside = outside, g_outside, _outward(inside, g_inside, outside, g_outside, farthest, secant)
     side = 0
     for _ in range(ITERATIONS):
         point = inside - g_inside * (outside - inside) / (g_outside - g_inside)
@@ -197,11 +200,14 @@ def _side(excess, first: float, past: float | None = None) -> float | None:
     return 0.5 * (inside + outside)
 
 
-def _outward(inside: float, g_inside: float, outside: float, g_outside: float, farthest: float) -> float:
+def _outward(
+    inside: float, g_inside: float, outside: float, g_outside: float, farthest: float, secant: bool = True
+) -> float:
     """The next offset past ``outside`` (both points still inside the interval): where the line through the two
-    crosses zero, at least 1.01 and at most 4 times ``outside``, and never past ``farthest``."""
+    reaches ``PAST`` (a point within the tolerance past the level is the end), at least 1.001 and
+    at most 4 times ``outside`` (4 times where not ``secant``), and never past ``farthest``."""
     ratio = 4.0
-    if g_outside > g_inside:
-        crossing = outside - g_outside * (outside - inside) / (g_outside - g_inside)
-        ratio = min(max(crossing / outside, 1.01), 4.0)
+    if secant and g_outside > g_inside:
+        aim = outside + (PAST - g_outside) * (outside - inside) / (g_outside - g_inside)
+        ratio = min(max(aim / outside, 1.001), 4.0)
     return outside * ratio if abs(outside * ratio) < abs(farthest) else farthest
