@@ -499,6 +499,26 @@ def test_a_term_whose_sizes_stop_short_of_the_ladder_says_where_its_peak_stays()
     )
 
 
+def test_a_dimensionless_size_is_said_without_a_unit_and_a_dimensional_one_with_it():
+    # Real agarose (inject.term=all): "| m 13.9 – |" for a strain-dependent K, the dash an axis label's "no unit".
+    from ptwin.pipeline.inject import limits_section
+
+    def trial(size, peak, named):
+        found = size if named else None
+        return Trial(
+            1.0, size, peak, "strong" if named else "", found, [0.8 * size, 1.2 * size], False, True, alone=size
+        )
+
+    native = {"strain_dependent_permeability": Own("m", 0.0, absent=0.0), "solid_viscosity": Own("gamma", 0.0)}
+    found = {
+        "strain_dependent_permeability": [trial(9.52, 16.0, False), trial(13.9, 31.6, True)],
+        "solid_viscosity": [trial(7.66, 64.0, True)],
+    }
+    strain, viscosity = limits_section(found, native, set())[-2:]
+    assert strain.startswith("| `strain_dependent_permeability` | m 13.9 | 31.6 |") and "| m 9.52 (16×" in strain
+    assert viscosity.startswith("| `solid_viscosity` | gamma 7.66 Pa s | 64.0 |")
+
+
 @pytest.mark.slow
 def test_the_detection_limit_of_every_candidate_term_is_in_the_report(default_set, tmp_path, coarse_cache):
     # A contact offset is a candidate at known contacts, but no force added stands for it (``NOT_INJECTED``): added

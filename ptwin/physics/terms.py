@@ -28,6 +28,8 @@ from ptwin.physics.power_law import kernel_decays, kernel_for, ting_integral
 from ptwin.physics.recurrence import first_order_lag, relaxation_integral
 from ptwin.physics.samples import Samples
 
+NO_UNIT = "–"  # a dimensionless parameter's unit, as axis labels show it
+
 
 @dataclass(frozen=True)
 class Parameter:
@@ -74,6 +76,10 @@ class Parameter:
         if math.isinf(self.absent):
             return high is None
         return (low is None or low <= self.absent) and (high is None or high >= self.absent)
+
+    def quantity(self, value: float) -> str:
+        """``value`` to three digits with its unit ('7.66 Pa s'), alone where it has none ('0.518', not '0.518 –')."""
+        return f"{value:.3g}" if self.unit == NO_UNIT else f"{value:.3g} {self.unit}"
 
     def label(self, name: str) -> str:
         """Axis label of a plot of this parameter, with its physical range."""
@@ -173,7 +179,7 @@ class Term(nn.Module):
             low, high = parameter.plausible
             value = self.value(name).item()
             if not low <= value <= high:
-                outside.append(f"{name} = {value:.3g} {parameter.unit} is outside [{low:g}, {high:g}]")
+                outside.append(f"{name} = {parameter.quantity(value)} is outside [{low:g}, {high:g}]")
         return "; ".join(outside) or None
 
     def violation(self) -> str | None:
@@ -248,7 +254,7 @@ class SolidRelaxation(Term):
 
     name = "solid_relaxation"
     PARAMS = {
-        "g": Parameter("–", 0.1, minimum=0.0, plausible=(0.0, 5.0), absent=0.0),
+        "g": Parameter(NO_UNIT, 0.1, minimum=0.0, plausible=(0.0, 5.0), absent=0.0),
         "tau": Parameter("s", 1.0, log=True, plausible=(1e-4, 1e4)),
     }
     STARTS = [{"tau": tau} for tau in (1e-2, 1e-1, 1.0, 10.0)]
@@ -269,7 +275,7 @@ class PowerLawRheology(Term):
     integral of the elastic law over any base history (alpha [–], 0 ≤ alpha < 0.5)."""
 
     name = "power_law_rheology"
-    PARAMS = {"alpha": Parameter("–", 0.05, minimum=0.0, maximum=0.5, plausible=(0.0, 0.5), absent=0.0)}
+    PARAMS = {"alpha": Parameter(NO_UNIT, 0.05, minimum=0.0, maximum=0.5, plausible=(0.0, 0.5), absent=0.0)}
     STARTS = [{"alpha": alpha} for alpha in (0.02, 0.1, 0.3)]
     TYPICAL = {"alpha": 0.05}
     TELL_APART = (
@@ -329,7 +335,7 @@ class StrainDependentPermeability(Term):
     """K → K·exp(−m w/ρ) (m [–])."""
 
     name = "strain_dependent_permeability"
-    PARAMS = {"m": Parameter("–", 0.0, minimum=0.0, plausible=(0.0, 50.0), absent=0.0)}
+    PARAMS = {"m": Parameter(NO_UNIT, 0.0, minimum=0.0, plausible=(0.0, 50.0), absent=0.0)}
     TYPICAL = {"m": 1.0}
     TELL_APART = "a deeper indent (the effect grows with w/rho, not with speed)"
 

@@ -436,13 +436,13 @@ def limits_section(found: dict[str, list[Trial]], native: dict[str, Own], alread
         if not trials:
             lines.append(f"| `{term}` | {_reach(LADDER[0], strength)}: not added | – | – | – |")
             continue
-        unit = VOCABULARY[term].PARAMS[strength].unit
+        parameter = VOCABULARY[term].PARAMS[strength]
         named = next((t for t in trials if t.confidence), None)
         missed = [t for t in trials if not t.confidence]
         last = "–"
         if missed:
             verdict = missed[-1].verdict(native[term])
-            last = f"{strength} {missed[-1].added:.3g} {unit} ({missed[-1].peak:.0f}×: {verdict})"
+            last = f"{strength} {parameter.quantity(missed[-1].added)} ({missed[-1].peak:.0f}×: {verdict})"
         if named is None:
             # a ladder cut short: no size tried reaches its next peak (a pore relaxation on the shared p03: 16× the
             # noise at M 89.9 Pa, below 32× at every M tried down to 30 Pa)
@@ -451,7 +451,7 @@ def limits_section(found: dict[str, list[Trial]], native: dict[str, Own], alread
             lines.append(f"| `{term}` | {tried} | – | – | {last} |")
         else:
             lines.append(
-                f"| `{term}` | {strength} {named.added:.3g} {unit} | {named.peak:.1f} | "
+                f"| `{term}` | {strength} {parameter.quantity(named.added)} | {named.peak:.1f} | "
                 f"{named.verdict(native[term])} | {last} |"
             )
     return lines
