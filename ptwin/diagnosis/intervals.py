@@ -1,22 +1,18 @@
 """95% intervals that hold under the noise model: profile likelihood.
 
-For one parameter of a fitted model the profile χ²_p(θ) is the least χ² with θ fixed
-and every other parameter refitted (a contact correction the fit holds too, within its
-range: ``held_range``). Under correlated noise the likelihood-ratio statistic is
-Δχ²/κ² (κ²: the noise model's block-variance inflation), also divided by the reduced χ²
-of the fit where that exceeds 1 (the misfit is then larger than the noise
-model says, as the Wald variance assumes too), and the interval is where it stays
-≤ 3.84 (χ² with one degree of freedom). Each side is found on the
-raw parameter (log K, log M, log tau: asymmetric intervals where the data are) by
-regula falsi (Illinois) on √Δ − √3.84, which is nearly linear in θ, from the Wald step
-outward (each outward point where the line through the last two meets the level). A side the data do not close
-within ``REACH`` steps of ×4 is None: the
-parameter is not bounded there. So is a side where the model stops being evaluable
-before the data close it (e.g. K so small that the Darcy force overflows): a failure of
-the model is no evidence against the parameter, and bisecting towards it would report the
-place where the arithmetic broke as a bound the data set. Given points ``beyond`` (an interval found already), each
-side is searched only past its point: where the profile closes before it, the point is returned (one refit a side
-where that is all a caller needs to know). Each profile point's refit runs LM as the fits do
+For one parameter of a fitted model the profile χ²_p(θ) is the least χ² with θ fixed and every other parameter
+refitted (a contact correction the fit holds too, within its range: ``held_range``). Under correlated noise the
+likelihood-ratio statistic is Δχ²/κ² (κ²: the noise model's block-variance inflation), also divided by the reduced
+χ² of the fit where that exceeds 1 (the misfit is then larger than the noise model says, as the Wald variance
+assumes too), and the interval is where it stays ≤ 3.84 (χ² with one degree of freedom). Each side is found on the
+raw parameter (log K, log M, log tau: asymmetric intervals where the data are) by regula falsi (Illinois) on √Δ −
+√3.84, which is nearly linear in θ, from the Wald step outward (each outward point where the line through the last
+two meets the level). A side the data do not close within ``REACH`` steps of ×4 is None: the parameter is not
+bounded there. So is a side where the model stops being evaluable before the data close it (e.g. K so small that the
+Darcy force overflows): a failure of the model is no evidence against the parameter, and bisecting towards it would
+report the place where the arithmetic broke as a bound the data set. Given points ``beyond`` (an interval found
+already), each side is searched only past its point: where the profile closes before it, the point is returned (one
+refit a side where that is all a caller needs to know). Each profile point's refit runs LM as the fits do
 (``physics_solver``): with LM's defaults it stopped short where K must move far from the last point (a pore
 relaxation doing nothing at its fit on a soft cantilever: M's lower end 6.29e3 Pa for 3.78e3 converged).
 """
@@ -102,8 +98,7 @@ def profile_interval(
         best = _lowest(settled, [start, *(_moved(start, entries) for entries in restarts)])
         closing = best is None or best[1] - fit.chi_square >= LEVEL * scale
         if closing and abs(warm["offset"]) > abs(offset):
-            fresh = theta.clone()
-            fresh[j] = theta[j] + offset
+            fresh = _moved(theta, {j: theta[j] + offset})
             best = min(filter(None, (best, _lowest(settled, [fresh]))), key=lambda pair: pair[1], default=None)
         if best is None:
             return math.inf
@@ -181,7 +176,7 @@ def _side(excess, first: float, past: float | None = None) -> float | None:
         inside, g_inside, outside = outside, g_outside, _outward(inside, g_inside, outside, g_outside, farthest, secant)
     side = 0
     for _ in range(ITERATIONS):
-        point = inside - g_inside * (outside - inside) / (g_outside - g_inside)
+        point = _on_line(inside, g_inside, outside, g_outside, 0.0)
         g = excess(point)
         if abs(g) < TOLERANCE:
             return point
@@ -208,6 +203,11 @@ def _outward(
     at most 4 times ``outside`` (4 times where not ``secant``), and never past ``farthest``."""
     ratio = 4.0
     if secant and g_outside > g_inside:
-        aim = outside + (PAST - g_outside) * (outside - inside) / (g_outside - g_inside)
-        ratio = min(max(aim / outside, 1.001), 4.0)
+        ratio = min(max(_on_line(inside, g_inside, outside, g_outside, PAST) / outside, 1.001), 4.0)
     return outside * ratio if abs(outside * ratio) < abs(farthest) else farthest
+
+
+def _on_line(inside: float, g_inside: float, outside: float, g_outside: float, level: float) -> float:
+    """The offset where the line through (``inside``, ``g_inside``) and (``outside``, ``g_outside``) reaches ``level``
+    of the excess: regula falsi's next point (``level`` 0), and an outward point's aim (``PAST``)."""
+    return inside + (level - g_inside) * (outside - inside) / (g_outside - g_inside)
