@@ -17,7 +17,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from ptwin.app import one_line_errors, start, typed
+from ptwin.app import exit_now, one_line_errors, start, typed
 from ptwin.pipeline.run import run
 
 start()
@@ -32,3 +32,4 @@ def main(cfg: DictConfig) -> None:
 
 if __name__ == "__main__":
     main()
+    exit_now()

@@ -8,12 +8,15 @@ traceback kept in the run directory."""
 from __future__ import annotations
 
 import gc
+import logging
+import os
 import sys
 import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NoReturn
 
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
@@ -59,6 +62,18 @@ def start(heap: bool = True) -> None:
     gc.freeze()
     if heap:
         keep_heap()
+
+
+def exit_now() -> NoReturn:
+    """End a face's process once its run has returned, its outputs written and closed and its children joined: the
+    logs and standard streams flushed, then ``os._exit(0)``. The interpreter's own teardown adds 0.2–0.4 s to
+    every run for nothing a run needs (torch unregistering its operators, and paging in the code that does it:
+    ``import torch`` alone then takes 0.36–0.40 s to exit, 0.02 s so; about 0.2 s of the demo). Exit handlers
+    are not run: a face that leaves a Dask cluster's to them (``python -m ptwin.map``) ends as usual."""
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def typed(cfg: DictConfig):

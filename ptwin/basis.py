@@ -13,7 +13,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from ptwin.app import one_line_errors, start, typed
+from ptwin.app import exit_now, one_line_errors, start, typed
 from ptwin.pgd.build import build_basis
 from ptwin.pgd.cache import cache_path
 from ptwin.physics.fluid_accuracy import verify
@@ -41,3 +41,4 @@ def main(cfg: DictConfig) -> None:
 
 if __name__ == "__main__":
     main()
+    exit_now()

@@ -212,3 +212,10 @@ def test_train_py_trains_the_twin_aside_and_finds_what_one_process_finds_bit_for
     assert (aside / "report.md").read_text() == report
     for name in here.figures:
         assert (aside / f"{name}.png").read_bytes() == (tmp_path / "here" / f"{name}.png").read_bytes(), name
+    # train.py ends its process at once (``ptwin.app.exit_now``): what it said and wrote is all there
+    assert result.stdout.rstrip().splitlines()[-1].startswith(f"results in {aside} (")
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    ran, made_here = (EventAccumulator(str(o / "tensorboard")).Reload().Tags() for o in (aside, tmp_path / "here"))
+    assert ran["scalars"] and sorted(ran["scalars"]) == sorted(made_here["scalars"])
+    assert ran["images"] and sorted(ran["images"]) == sorted(made_here["images"])
