@@ -10,6 +10,7 @@ from __future__ import annotations
 import gc
 import logging
 import os
+import select
 import sys
 import traceback
 from collections.abc import Iterator
@@ -88,13 +89,23 @@ def typed(cfg: DictConfig):
 @contextmanager
 def one_line_errors(output_dir: Path) -> Iterator[None]:
     """Errors a user can fix end the run with their one line and exit code 2; anything else with one
-    line naming it and ``output_dir/error.log`` (the traceback, to report) and exit code 3."""
+    line naming it and ``output_dir/error.log`` (the traceback, to report) and exit code 3. A run whose standard
+    output was closed (piped into ``head``) says so in one line, exit code 2."""
     try:
         yield
     except (RecordingError, StoredFileError, SettingsError, EngineError) as error:
         print(error, file=sys.stderr)
         raise SystemExit(2) from None
     except Exception as error:
+        if isinstance(error, BrokenPipeError) and _output_closed():
+            # Python's advice: the closed output pointed at /dev/null, or the flush at exit raises again
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            print(
+                "ptwin: the run's output was closed before it ended (piped into a command that stopped reading, "
+                "such as head), so the run stopped there; pipe it through `tee FILE` to read it whole",
+                file=sys.stderr,
+            )
+            raise SystemExit(2) from None
         log = output_dir / "error.log"
         log.parent.mkdir(parents=True, exist_ok=True)
         log.write_text(traceback.format_exc())
@@ -104,3 +115,14 @@ def one_line_errors(output_dir: Path) -> Iterator[None]:
             file=sys.stderr,
         )
         raise SystemExit(3) from None
+
+
+def _output_closed() -> bool:
+    """Whether nothing reads the standard output any longer: a pipe whose reader has gone polls as an error. False
+    where that cannot be told (no poll, no file descriptor), so a broken pipe elsewhere is reported as unexpected."""
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(event & select.POLLERR for _, event in poller.poll(0))
+    except (AttributeError, OSError, ValueError):
+        return False

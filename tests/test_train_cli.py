@@ -37,6 +37,36 @@ def test_bad_recording_set_ends_with_one_located_line(tmp_path):
     assert "Traceback" not in result.stderr
 
 
+def test_a_run_whose_output_is_closed_says_so_in_one_line(tmp_path, coarse_cache):
+    # ``python train.py | head``: the reader gone, the next progress line raises; no "unexpected ..., report it"
+    process = subprocess.Popen(
+        [sys.executable, "train.py", f"hydra.run.dir={tmp_path / 'run'}", "pgd=coarse", f"cache_dir={coarse_cache}"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    process.stdout.close()
+    stderr = process.communicate(timeout=120)[1]
+    assert process.returncode == 2
+    assert stderr.strip().splitlines() == [
+        "ptwin: the run's output was closed before it ended (piped into a command that stopped reading, such as "
+        "head), so the run stopped there; pipe it through `tee FILE` to read it whole"
+    ]
+    assert not (tmp_path / "run" / "error.log").exists()
+
+
+def test_a_broken_pipe_elsewhere_is_reported_as_unexpected(tmp_path, monkeypatch):
+    from ptwin.app import one_line_errors
+
+    with (tmp_path / "out.txt").open("w") as stdout:  # an output that is read: the pipe that broke is another's
+        monkeypatch.setattr(sys, "stdout", stdout)
+        with pytest.raises(SystemExit) as ended, one_line_errors(tmp_path):
+            raise BrokenPipeError("a worker's socket")
+    assert ended.value.code == 3
+    assert "BrokenPipeError: a worker's socket" in (tmp_path / "error.log").read_text()
+
+
 def test_a_typo_in_a_config_key_fails_at_the_command_line(tmp_path):
     result = run_train(tmp_path, "pgd.plane.ringz=3")
     assert result.returncode != 0
