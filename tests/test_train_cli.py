@@ -1,5 +1,6 @@
 """train.py as users run it: bad recordings end the run with one line, exit code 2."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -54,6 +55,18 @@ def test_a_run_whose_output_is_closed_says_so_in_one_line(tmp_path, coarse_cache
         "head), so the run stopped there; pipe it through `tee FILE` to read it whole"
     ]
     assert not (tmp_path / "run" / "error.log").exists()
+
+
+def test_a_face_whose_reader_left_after_its_last_line_still_ends_cleanly():
+    # exit_now flushes what is still buffered; with the reader gone that raised, a traceback after a finished run
+    code = "import sys; from ptwin.app import exit_now; sys.stdout.write('results in …'); exit_now()"
+    environment = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # the line stays buffered
+    process = subprocess.Popen(
+        [sys.executable, "-c", code], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment
+    )
+    process.stdout.close()  # before the child, still importing, writes a byte
+    stderr = process.communicate(timeout=60)[1]
+    assert (process.returncode, stderr) == (0, b"")
 
 
 def test_a_broken_pipe_elsewhere_is_reported_as_unexpected(tmp_path, monkeypatch):
