@@ -973,6 +973,31 @@ def test_structure_no_term_explains_is_said_beside_what_a_term_takes_of_it(named
         assert "No term of the vocabulary explains the residual" in sentence and "no term is claimed" in line
 
 
+@pytest.mark.parametrize("named", [PAIR[:1], PAIR])
+def test_the_terms_left_out_are_said_in_their_number(named):
+    # A real JPK creep (shared data/afm, pr14 polymer gel): "left out solid_relaxation and power_law_rheology
+    # (confidence moderate, moderate): with it the validation RMS falls to 2.52× the noise std".
+    from types import SimpleNamespace
+
+    from ptwin.diagnosis.words import summarise
+
+    named = [dict(entry, confidence="moderate") for entry in named]
+    d = SimpleNamespace(
+        detected=True,
+        unexplained=False,
+        left_out=named,
+        where=[],
+        fit={"base": {"val_rmse": 3e-10}, "corrected": {"val_rmse": 2e-10}, "hybrid": {"val_rmse": None}},
+        noise_floor=1e-10,
+        whiteness={"base": 50.0, "corrected": 1.0},
+        confounded=[],
+        permeability={"corrected": 2e-16, "corrected_interval": [1.9e-16, 2.1e-16]},
+    )
+    sentence = summarise(d, None, ABOVE_FIVE)
+    them = "them" if len(named) > 1 else "it"
+    assert f"): with {them} the validation RMS falls to 2.00× the noise std." in sentence
+
+
 def test_structure_terms_would_remove_but_no_rule_keeps_is_said_so_with_the_smallest_of_them():
     # Bench-set p03 (real PAAm noise) with a solid relaxation of 64× the noise added: its fit, and a strain-dependent
     # K's, left whiteness 1.3 and 1.5 against 6.6, and each fell short on the validation samples (14 units of χ²

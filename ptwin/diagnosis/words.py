@@ -104,9 +104,10 @@ def _findings(d, apparent, test) -> str:
         return sentence + f"{part}{kept}K ({k}) comes from a model that misses the data, so no interval is given."
     if all(entry["confidence"] != "weak" for entry in entries):
         grades = ", ".join(entry["confidence"] for entry in entries)
+        them = "them" if len(entries) > 1 else "it"
         return (
             sentence
-            + f"The base model left out {names} (confidence {grades}): with it the validation RMS falls to {after}."
+            + f"The base model left out {names} (confidence {grades}): with {them} the validation RMS falls to {after}."
             + _to_make_strong(entries)
         )
     sentence += f"{names} would explain it (the validation RMS falls to {after}), but the evidence is weak"
