@@ -940,25 +940,31 @@ def test_the_networks_witness_is_never_a_negative_share():
 PAIR = [{"term": "solid_relaxation", "confidence": "weak"}, {"term": "solid_viscosity", "confidence": "weak"}]
 
 
-@pytest.mark.parametrize("named", [[], [{"term": "solid_viscosity", "confidence": "weak"}], PAIR])
-def test_structure_no_term_explains_is_said_beside_what_a_term_takes_of_it(named):
+def _named(named: list[dict], unexplained: bool):
+    """A diagnosis that names ``named`` (its ``left_out`` entries), the corrected model at 2× the noise std against
+    the base model's 3×, no twin trained; ``unexplained``: structure is left that no term explains."""
     from types import SimpleNamespace
 
-    from ptwin.diagnosis.words import summarise
-    from ptwin.reporting.report import _others
-
-    d = SimpleNamespace(
+    return SimpleNamespace(
         detected=True,
-        unexplained=True,
+        unexplained=unexplained,
         left_out=named,
         where=[],
         fit={"base": {"val_rmse": 3e-10}, "corrected": {"val_rmse": 2e-10}, "hybrid": {"val_rmse": None}},
         noise_floor=1e-10,
-        whiteness={"base": 50.0, "corrected": 30.0},
+        whiteness={"base": 50.0, "corrected": 30.0 if unexplained else 1.0},
         confounded=[],
         permeability={"corrected": 2e-16, "corrected_interval": [None, None]},
         candidates={(): candidate((), 1500.0, 3e-10, whiteness=50.0)},
     )
+
+
+@pytest.mark.parametrize("named", [[], [{"term": "solid_viscosity", "confidence": "weak"}], PAIR])
+def test_structure_no_term_explains_is_said_beside_what_a_term_takes_of_it(named):
+    from ptwin.diagnosis.words import summarise
+    from ptwin.reporting.report import _others
+
+    d = _named(named, unexplained=True)
     sentence = summarise(d, None, ABOVE_FIVE)
     payload = {"rejected": [], "confounded": [], "unexplained": True, "left_out": named, "fit": d.fit}
     line = _others(payload)[0]
@@ -977,23 +983,10 @@ def test_structure_no_term_explains_is_said_beside_what_a_term_takes_of_it(named
 def test_the_terms_left_out_are_said_in_their_number(named):
     # A real JPK creep (shared data/afm, pr14 polymer gel): "left out solid_relaxation and power_law_rheology
     # (confidence moderate, moderate): with it the validation RMS falls to 2.52× the noise std".
-    from types import SimpleNamespace
-
     from ptwin.diagnosis.words import summarise
 
     named = [dict(entry, confidence="moderate") for entry in named]
-    d = SimpleNamespace(
-        detected=True,
-        unexplained=False,
-        left_out=named,
-        where=[],
-        fit={"base": {"val_rmse": 3e-10}, "corrected": {"val_rmse": 2e-10}, "hybrid": {"val_rmse": None}},
-        noise_floor=1e-10,
-        whiteness={"base": 50.0, "corrected": 1.0},
-        confounded=[],
-        permeability={"corrected": 2e-16, "corrected_interval": [1.9e-16, 2.1e-16]},
-    )
-    sentence = summarise(d, None, ABOVE_FIVE)
+    sentence = summarise(_named(named, unexplained=False), None, ABOVE_FIVE)
     them = "them" if len(named) > 1 else "it"
     assert f"): with {them} the validation RMS falls to 2.00× the noise std." in sentence
 
