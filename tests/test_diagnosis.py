@@ -979,15 +979,14 @@ def test_structure_no_term_explains_is_said_beside_what_a_term_takes_of_it(named
         assert "No term of the vocabulary explains the residual" in sentence and "no term is claimed" in line
 
 
-@pytest.mark.parametrize("named", [PAIR[:1], PAIR])
-def test_the_terms_left_out_are_said_in_their_number(named):
+@pytest.mark.parametrize(("named", "them"), [(PAIR[:1], "it"), (PAIR, "them")])
+def test_the_terms_left_out_are_said_in_their_number(named, them):
     # A real JPK creep (shared data/afm, pr14 polymer gel): "left out solid_relaxation and power_law_rheology
     # (confidence moderate, moderate): with it the validation RMS falls to 2.52× the noise std".
     from ptwin.diagnosis.words import summarise
 
     named = [dict(entry, confidence="moderate") for entry in named]
     sentence = summarise(_named(named, unexplained=False), None, ABOVE_FIVE)
-    them = "them" if len(named) > 1 else "it"
     assert f"): with {them} the validation RMS falls to 2.00× the noise std." in sentence
 
 
