@@ -24,6 +24,7 @@ from ptwin.pipeline.inject import (
     detection_limits,
     detection_section,
     judged_peak,
+    native_strength,
 )
 from ptwin.pipeline.prepare import prepare
 from ptwin.synth.simulator import Experiment
@@ -172,6 +173,21 @@ def test_the_recordings_own_strength_a_size_is_read_over_is_said_as_the_data_fix
     structured = Own("g", 0.0651, 0.0, [None, None], misses_data=True).fitted()
     assert structured.startswith("g 0.0651 (from a model that misses the data")
     assert Own("g", 0.0651).fitted() == "g 0.0651"  # not profiled
+
+
+def test_the_recordings_own_strength_is_the_one_their_diagnosis_fitted_and_profiled():
+    # A real PAAm place said "gamma fitted alone: 0.246 (95%: 0 to 0.85)" and "read over the recordings' own gamma
+    # 0.246 (95%: 0 to 1.11)" in one line: the own was fitted again, under the noise model before the diagnosis's
+    # cap. Nothing is fitted where the diagnosis fitted the term (no recordings are given here to fit).
+    recorded = Trial(0.0, None, 0.0, "", None, [None, None], False, True, 0.246, alone_interval=[0.0, 0.85])
+    own = native_strength(None, "solid_viscosity", 60, None, recorded)
+    assert own.fitted() == "gamma 0.246 (95%: 0 to 0.85)"
+    structured = native_strength(None, "solid_viscosity", 60, None, replace(recorded, alone_misses_data=True))
+    assert structured.fitted().startswith("gamma 0.246 (from a model that misses the data")
+    not_physical = native_strength(
+        None, "solid_viscosity", 60, None, replace(recorded, alone=-2.37, alone_interval=None)
+    )
+    assert not_physical.value == not_physical.absent == 0.0
 
 
 def test_a_term_read_as_another_it_cannot_be_told_from_says_so():

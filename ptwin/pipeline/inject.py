@@ -59,7 +59,7 @@ class Own:
     strength: str  # the term's strength parameter (its first)
     value: float  # the strength fitted; ``absent`` where that fit fails or is not physical
     absent: float = 0.0  # the strength at which the term does nothing (``Parameter.absent``)
-    interval: list[float | None] | None = None  # its 95% profile interval (None: not profiled)
+    interval: list[float | None] | None = None  # its 95% profile interval (None: not profiled, or ``misses_data``)
     misses_data: bool = False  # the value is that of a model that leaves structure, which no interval bounds
 
     def beyond(self, found: float) -> float | None:
@@ -94,7 +94,7 @@ class Own:
         said, beside its 95% interval, or what the data say of it where they do not close it (bench-set p04 as
         recorded: "g 0.0651", a bare value the data may not fix)."""
         value = f"{self.strength} {self.value:.3g}"
-        if self.interval is None:
+        if self.interval is None and not self.misses_data:
             return value
         said = bounded(self.value, self.interval, ".3g", misses_data=self.misses_data)
         if self.misses_data or None not in self.interval:
@@ -561,13 +561,22 @@ def native_strength(prepared: Prepared, term: str, iterations: int, base_fit: Ph
     """The term's strength the recordings fit as they are, named or not: what a size found is read against.
     Where their diagnosis (``as_recorded``) names it, its value there, beside the other terms named with it (a
     size added is then found in that model: on a real creep named with a power law, g 0.148, where alone it fits
-    0.251); else fitted alone, from the starts the diagnosis gives it (``base_fit``: the base model fitted to the
-    training samples)."""
+    0.251); else, where it fitted the term, the term fitted alone there with its profile (``Trial.alone``), under
+    the noise model that diagnosis read everything under: fitted again here, under the one ``prepare`` reads
+    before a diagnosis caps it, a real PAAm place said "gamma fitted alone: 0.246 (95%: 0 to 0.85)" and "read over
+    the recordings' own gamma 0.246 (95%: 0 to 1.11)" in one line. Where it did not (no candidate there: a drag
+    whose removed per-curve levels take it), fitted alone here, from the starts the diagnosis gives it
+    (``base_fit``: the base model fitted to the training samples)."""
     strength = VOCABULARY[term].strength()
     parameter = VOCABULARY[term].PARAMS[strength]
     absent = 0.0 if parameter.absent is None else parameter.absent  # a strength no one value removes: read from 0
     if as_recorded.confidence:
         return Own(strength, as_recorded.found, absent, list(as_recorded.interval), as_recorded.unexplained)
+    if as_recorded.candidate:  # profiled where that fit is physical (``_profiling``), else failed or not physical
+        if as_recorded.alone_interval is None and not as_recorded.alone_misses_data:
+            return Own(strength, absent, absent)
+        interval = None if as_recorded.alone_misses_data else list(as_recorded.alone_interval)
+        return Own(strength, as_recorded.alone, absent, interval, misses_data=as_recorded.alone_misses_data)
     samples, train = prepared.samples, prepared.split.train
     try:
         fit = fit_with_starts(prepared.make_model, (term,), samples, train, iterations, base_fit)
