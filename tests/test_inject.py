@@ -106,7 +106,7 @@ def test_a_verdict_says_which_other_terms_the_diagnosis_named():
     others = (("pore_pressure_relaxation", "strong"), ("solid_relaxation", "weak"))
     missed = Trial(1.0, 5.0, 36.6, "", None, [None, None], False, True, -5.72, others)
     assert missed.verdict(Own("gamma", 0.0)) == (
-        "not named (gamma -5.72 fitted alone); the diagnosis named pore_pressure_relaxation (strong) + "
+        "not named (gamma -5.72 fitted alone, not physical); the diagnosis named pore_pressure_relaxation (strong) + "
         "solid_relaxation (weak)"
     )
     named = Trial(2.0, 10.0, 73.2, "weak", 9.79, [8.61, 11.1], False, True, others=others[1:])
@@ -157,7 +157,9 @@ def test_a_strength_fitted_alone_is_said_as_the_data_fix_it():
     assert above.verdict(own) == "not named (g fitted alone: > 0.3 (95%; the data set no upper limit))"
     structured = replace(flat, alone_interval=None, alone_misses_data=True, unexplained=True)
     assert structured.verdict(own).startswith("unexplained (g fitted alone: 4.46 (from a model that misses the data")
-    assert replace(flat, alone_interval=None).verdict(own) == "not named (g 4.46 fitted alone)"  # not profiled
+    assert (
+        replace(flat, alone_interval=None).verdict(own) == "not named (g 4.46 fitted alone, not physical)"
+    )  # not profiled
 
 
 def test_the_recordings_own_strength_a_size_is_read_over_is_said_as_the_data_fix_it():
@@ -197,8 +199,8 @@ def test_a_term_read_as_another_it_cannot_be_told_from_says_so():
     rival = ("strain_dependent_permeability",)
     missed = Trial(64.0, 0.328, 64.0, "", None, [None, None], False, True, 1.86, named, confounded=rival)
     assert missed.verdict(Own("g", 0.0)) == (
-        "not named (g 1.86 fitted alone); the diagnosis named strain_dependent_permeability (weak) in its place: "
-        "these recordings cannot tell the two apart"
+        "not named (g 1.86 fitted alone, not physical); the diagnosis named strain_dependent_permeability (weak) in "
+        "its place: these recordings cannot tell the two apart"
     )
     both = (("pore_pressure_relaxation", "strong"), *named)
     partly = Trial(64.0, 0.328, 64.0, "", None, [None, None], False, True, 1.86, both, confounded=rival)
@@ -250,10 +252,12 @@ def test_a_term_not_named_comes_with_the_base_model_permeability():
     as_recorded = Trial(0.0, None, 0.0, "", None, [None, None], True, True, -2.48, permeability=1.58e-9)
     added = Trial(1.0, 5.0, 35.2, "", None, [None, None], True, True, 2.51, permeability=1.17e-15)
     assert as_recorded.verdict(Own("gamma", 0.0)) == (
-        "unexplained (gamma -2.48 fitted alone; the base model's K at the field's 1e-09 m² limit or beyond: no fluid "
-        "force)"
+        "unexplained (gamma -2.48 fitted alone, not physical; the base model's K at the field's 1e-09 m² limit or "
+        "beyond: no fluid force)"
     )
-    assert added.verdict(Own("gamma", 0.0)) == "unexplained (gamma 2.51 fitted alone; the base model's K 1.17e-15 m²)"
+    assert added.verdict(Own("gamma", 0.0)) == (
+        "unexplained (gamma 2.51 fitted alone, not physical; the base model's K 1.17e-15 m²)"
+    )
     nothing_fitted = Trial(1.0, 5.0, 35.2, "", None, [None, None], False, False, permeability=2e-15)
     assert nothing_fitted.verdict(Own("gamma", 0.0)) == (
         "not named (no candidate in these recordings; the base model's K 2e-15 m²)"
@@ -511,7 +515,7 @@ def test_a_term_whose_sizes_stop_short_of_the_ladder_says_where_its_peak_stays()
     assert row.startswith(
         "| `pore_pressure_relaxation` | not named up to a peak of 16× the noise; its peak stays below 32× the noise "
         "for M 0.001 to 1000 times a typical one (as physical) | – | – | M 89.9 Pa (16×: not named (M 4e+04 fitted "
-        "alone))"
+        "alone, not physical))"
     )
 
 

@@ -174,10 +174,13 @@ class Trial:
 
     def _alone_words(self) -> str:
         """The strength fitted alone as the data fix it (``bounded``), where its diagnosis profiled it; else the
-        value (a fit that is not physical). Bench-set p03 with a solid relaxation of 32× the noise added (g 0.164)
-        said "g 4.46 fitted alone", a flat direction's value: now "g fitted alone: not fixed by these data"."""
+        value, said to be that of a fit that is not physical. Bench-set p03 with a solid relaxation of 32× the
+        noise added (g 0.164) said "g 4.46 fitted alone", a flat direction's value: now "g fitted alone: not fixed
+        by these data". A real PAAm place with a pore relaxation added said "M 1.16e+04 fitted alone", a fit whose
+        elastic law falls with depth, rejected: a value no measurement unless said so (a negative gamma shows it,
+        an M does not)."""
         if self.alone_interval is None and not self.alone_misses_data:
-            return f"{self.alone:.3g} fitted alone"
+            return f"{self.alone:.3g} fitted alone, not physical"
         return "fitted alone: " + bounded(self.alone, self.alone_interval, ".3g", misses_data=self.alone_misses_data)
 
     def _listed(self, terms: tuple[str, ...] | None = None) -> str:
