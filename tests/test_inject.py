@@ -473,6 +473,20 @@ def test_a_term_the_recordings_name_already_is_not_added_up_the_ladder(tmp_path,
     assert float(held.group(2)) < 5.0 < float(held.group(3))
 
 
+def test_a_term_whose_sizes_never_reach_the_ladder_says_so_as_it_goes(tmp_path, coarse_cache, monkeypatch):
+    # Real agarose (three speeds at one place): a pore relaxation peaks below 8× the noise at every M tried. The
+    # report's table said so, but the progress went from [2/5] to [4/5] without a word for it.
+    import ptwin.pipeline.inject as inject
+
+    folder = simulated_set(tmp_path / "set")
+    settings = inject_settings(folder, coarse_cache, "inject.term=all", "diagnosis.terms=[solid_viscosity]")
+    monkeypatch.setattr(inject, "_ladder", lambda *_: [])  # no size of it reaches the first peak
+    lines = []
+    assert detection_limits(settings, tmp_path / "run", progress=lines.append) == {"solid_viscosity": []}
+    assert lines[-1].startswith("  [1/1] solid_viscosity: its peak stays below 8× the noise for gamma")
+    assert lines[-1].endswith(": not added")
+
+
 def test_recordings_that_name_as_many_terms_as_are_fitted_together_say_another_needs_more():
     # The public JPK creep names solid_relaxation + power_law_rheology as recorded: with diagnosis.max_terms 2 no term
     # added beside them both can be named, whatever its size; in place of one it can (a brain creep's viscosity).

@@ -298,7 +298,10 @@ def detection_limits(
             held = f"{strength} {recorded.found_words()}"
             progress(f"  [{i}/{len(terms)}] {term}: {ALREADY} ({recorded.confidence}), {held}; not added")
             continue
-        for peak, params in _ladder(prepared, term, base_fit):
+        ladder = _ladder(prepared, term, base_fit)
+        if not ladder:  # the table says so too (``limits_section``)
+            progress(f"  [{i}/{len(terms)}] {term}: {_reach(LADDER[0], strength)}: not added")
+        for peak, params in ladder:
             folder = output_dir / f"{term}-peak-{peak:g}"
             trial = _added(settings, prepared, base_fit, as_recorded, term, params, folder)
             found[term].append(trial)
