@@ -1206,6 +1206,26 @@ def test_the_printed_table_gives_k_s_interval_where_rivals_leave_it_no_std():
     assert "5.71e-16 [6.6e-18, 4.3e-13]" in lines[1]
 
 
+def test_the_printed_table_gives_no_k_where_the_data_close_no_side():
+    # Real PAAm at two speeds (one place of a map session): the table read "diagnosis: corrected 4.233e-16" where
+    # report.md said "corrected not fixed by these data".
+    from ptwin.reporting.report import print_summary
+
+    def row(unexplained: bool) -> str:
+        lines = []
+        diagnosis = {
+            "fit": {"corrected": {"val_rmse": 2e-11, "test_rmse": 2e-11}},
+            "permeability": {"corrected": 4.233e-16, "corrected_std": None, "corrected_interval": [None, None]},
+            "mismatch": {"summary": "…"},
+            "unexplained": unexplained,
+        }
+        print_summary({"stages": {}, "noise_floor": 1.3e-11}, diagnosis, lines.append)
+        return lines[1]
+
+    assert row(False).split()[2:6] == ["not", "fixed", "by", "these"]
+    assert "4.233e-16 (the model misses the data)" in row(True)
+
+
 def test_the_identification_table_gives_no_k_the_data_cannot_fix():
     # Real agarose B as recorded: stage 1 read '1.579e-09 ± 0.00034', a K past the field with a std 2e5 times it.
     # A JPK creep of a polymer gel (afmformats' test file): stage 2 read '1.733e-17 ± 8.3e-20' at gamma = -244.

@@ -58,11 +58,18 @@ def print_summary(results: dict, diagnosis: dict, progress=print, fitted: dict |
     fit = diagnosis["fit"]["corrected"]
     permeability = diagnosis["permeability"]
     low, high = permeability["corrected_interval"]
-    corrected = _k((fitted or permeability)["corrected"], permeability["corrected_std"])
+    value = (fitted or permeability)["corrected"]
+    corrected = _k(value, permeability["corrected_std"])
     if one_sided((low, high)):  # the bound is all the data say
         corrected = f"< {high:.4g}" if low is None else f"> {low:.4g}"
     elif permeability["corrected_std"] is None and low is not None:  # rivals or a held contact: the interval, no std
         corrected = f"{number(permeability['corrected'], '.3g')} [{low:.2g}, {high:.2g}]"
+    elif low is None and value is not None and not fluid_off(value):  # no side closed, as report.md says it
+        # (real PAAm, two speeds: "4.233e-16" here beside "corrected not fixed by these data" in report.md)
+        unexplained = diagnosis.get("unexplained")
+        corrected = (
+            f"{number(value, '.4g')} (the model misses the data)" if unexplained else bounded(value, [None, None])
+        )
     rows.append(("diagnosis: corrected", corrected, _nano(fit["val_rmse"]), _nano(fit["test_rmse"])))
     width = max(24, *(len(row[1]) for row in rows))
     progress(f"{'stage':<26s} {'K [m²]':>{width}s} {'val RMSE nN':>12s} {'test RMSE nN':>13s}")
