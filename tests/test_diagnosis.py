@@ -990,6 +990,20 @@ def test_the_terms_left_out_are_said_in_their_number(named, them):
     assert f"): with {them} the validation RMS falls to 2.00× the noise std." in sentence
 
 
+def test_the_summary_says_a_k_the_data_close_on_no_side_is_not_fixed():
+    # Real agarose at two speeds (one place of a map session): "No structure in the base model's residual beyond
+    # what noise alone leaves (…)." and not a word of K, whose interval was open both ways ("corrected not fixed by
+    # these data" in report.md's Fit section only).
+    from ptwin.diagnosis.words import summarise
+
+    named = _named([{"term": "solid_viscosity", "confidence": "moderate"}], unexplained=False)
+    assert summarise(named, None, ABOVE_FIVE).endswith("the noise std. K is not fixed by these data.")
+    named.permeability["corrected_interval"] = [1e-16, 3e-16]
+    assert "fixed" not in summarise(named, None, ABOVE_FIVE)
+    missing = _named([], unexplained=True)  # K from a model that misses the data: said so, and only that
+    assert summarise(missing, None, ABOVE_FIVE).endswith("so no interval is given.")
+
+
 def test_structure_terms_would_remove_but_no_rule_keeps_is_said_so_with_the_smallest_of_them():
     # Bench-set p03 (real PAAm noise) with a solid relaxation of 64× the noise added: its fit, and a strain-dependent
     # K's, left whiteness 1.3 and 1.5 against 6.6, and each fell short on the validation samples (14 units of χ²

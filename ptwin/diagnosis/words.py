@@ -61,10 +61,14 @@ def bounded(value: float | None, interval, spec: str = ".3g", unit: str = "", mi
 
 def summarise(d, apparent, test) -> str:
     """One paragraph a person can read: where the base model misses, what (if anything) explains it, and K
-    where the data bound it on one side only."""
-    interval = d.permeability["corrected_interval"]
+    where the data bound it on one side only, or on none (where the findings do not say so with the models' K:
+    real agarose at two speeds said nothing of K, its interval open both ways)."""
+    interval, findings = d.permeability["corrected_interval"], _findings(d, apparent, test)
     bound = f" K {bounded(d.permeability['corrected'], interval, '.3g', ' m²')}." if one_sided(interval) else ""
-    return _findings(d, apparent, test) + bound
+    listed = _permeability_not_fixed(d)  # said in some findings, beside the K of each model
+    if interval == [None, None] and not d.unexplained and not (listed and listed in findings):
+        bound = f" K is {bounded(d.permeability['corrected'], interval)}."
+    return findings + bound
 
 
 def _findings(d, apparent, test) -> str:
