@@ -1,10 +1,13 @@
 """A new term is one class: registered once, it is fitted, selected, reported and plotted."""
 
+from functools import partial
+
 import pandas as pd
 import pytest
 
 from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.physics.terms import VOCABULARY, Parameter, Term
+from ptwin.reporting import figures
 from tests.conftest import run, simulated_set
 
 
@@ -21,6 +24,19 @@ class RateStiffening(Term):
 
 def test_a_toy_term_is_fitted_selected_reported_and_plotted(tmp_path, coarse_cache, monkeypatch):
     monkeypatch.setitem(VOCABULARY, RateStiffening.name, RateStiffening)
+    drawn = figures._drawn
+
+    def titled(output_dir, builders, progress):
+        """``_drawn``, each figure's first title written beside it: figures are drawn aside, and only files return."""
+
+        def build(name, builder):
+            figure = builder()
+            (tmp_path / f"{name}.title").write_text(figure.axes[0].get_title())
+            return figure
+
+        return drawn(output_dir, {name: partial(build, name, b) for name, b in builders.items()}, progress)
+
+    monkeypatch.setattr(figures, "_drawn", titled)
     truth = 20.0  # 6 nN at 80 µm/s and 4 µm: 20× the noise
     folder = simulated_set(tmp_path / "set", base_speeds=(0.5e-6, 8e-6, 80e-6), samples=500)
     recordings = load_recordings(folder)
@@ -44,8 +60,9 @@ def test_a_toy_term_is_fitted_selected_reported_and_plotted(tmp_path, coarse_cac
     assert [entry["term"] for entry in named] == [RateStiffening.name]
     assert named[0]["params"]["c"] == pytest.approx(truth, rel=0.1)
     assert f"Left out: `{RateStiffening.name}`" in (tmp_path / "run" / "report.md").read_text()
-    title = outcome.figures["diagnosis_curves"].axes[0].get_title()
-    assert RateStiffening.name in title
+    assert outcome.figures["diagnosis_curves"] == tmp_path / "run" / "diagnosis_curves.png"
+    assert outcome.figures["diagnosis_curves"].is_file()
+    assert RateStiffening.name in (tmp_path / "diagnosis_curves.title").read_text()
 
 
 def test_the_permeabilities_a_term_starts_from_follow_its_hooks_and_its_contact_caveat(monkeypatch):

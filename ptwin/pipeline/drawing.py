@@ -12,7 +12,7 @@ Say = Callable[[str], None]
 
 
 class Drawing:
-    """``start(draw)`` runs ``draw(say)`` → {name: figure} aside, where a fork may be made (``fork``);
+    """``start(draw)`` runs ``draw(say)`` → {name: its PNG file} aside, where a fork may be made (``fork``);
     ``figures(progress)`` waits for them ({} where none was started) and says through ``progress`` what ``draw``
     said. Leave it as a context manager: drawing still going when the caller fails is stopped."""
 

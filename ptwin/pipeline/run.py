@@ -70,7 +70,7 @@ BASE_RESIDUAL = (
 class RunResult:
     results: dict  # results.json
     diagnosis: dict  # diagnosis.json
-    figures: dict  # {name: matplotlib figure}, each saved as name.png
+    figures: dict  # {name: its PNG file}
     candidates: dict[str, dict[str, float] | None]  # each term the diagnosis fitted → its values fitted alone
     # (None: that fit failed); the others were no candidates for this set
     base_permeability: float | None = None  # the diagnosis's base model's K as its fit found it [m²] (diagnosis.json

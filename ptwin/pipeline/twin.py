@@ -56,7 +56,7 @@ class TwinAside:
     """``train_twin`` aside (``ptwin.aside``), its LM steps logged to TensorBoard (``output_dir/tensorboard``) where
     it trains; ``outcome()`` waits for it. The twin comes back as its parameters and is rebuilt here from the same
     start, so it predicts what the trained one did, bit for bit. ``draw``: figures of the trained twin (twin →
-    {name: figure}, its lines said through the progress it is given), drawn aside too once the twin is here, while
+    {name: its PNG file}, its lines said through the progress it is given), drawn aside too once the twin is here, while
     the caller goes on; ``drawn()`` waits for them. A progress bar only where nothing else is said meanwhile: where
     the twin trains here, when first asked for. Leave it as a context manager: work aside that is still going when
     the caller fails is stopped."""

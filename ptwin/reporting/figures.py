@@ -90,7 +90,7 @@ def figure_file(output_dir: Path, name: str) -> Path:
 
 def stage_figures(output_dir: Path, samples, split, identification, twin, rate=None, progress=print) -> dict:
     """The figures of stages 1–3, saved as PNG into ``output_dir``: the paper's 3, 4 and 6–9 and the rate effect.
-    The diagnosis changes none of them, so a run draws them aside beside it. Returns {name: figure}.
+    The diagnosis changes none of them, so a run draws them aside beside it. Returns {name: its PNG file}.
 
     ``identification``: stages 1–2 (``base``, ``apparent``, ``viscous_per_curve``); ``twin``: the hybrid twin;
     ``rate``: the rate effect before any model (``ptwin.data.evidence.RateEffect``), or None. A figure matplotlib
@@ -130,7 +130,7 @@ def diagnosis_figures(
     """The figures of the corrected model (the terms ``chosen``, ``corrected_model`` their fitted model), saved as
     PNG into ``output_dir``: the paper's 5 (``corrected_per_curve``: K per curve of the corrected model, or None),
     the holds and creeps where there are any, and the diagnosis's residuals and its network against the named
-    terms. Returns {name: figure}."""
+    terms. Returns {name: its PNG file}."""
     base_force, _, correction = _forces(samples, identification.base.model, twin)
     with torch.no_grad():
         corrected = corrected_model(samples).cpu()
@@ -146,7 +146,7 @@ def diagnosis_figures(
 
 def proposal_figures(output_dir: Path, predictions, progress=print) -> dict:
     """The next experiments the diagnosis proposes (``Diagnosis.predictions``), a figure each, saved as PNG into
-    ``output_dir``. Returns {name: figure}."""
+    ``output_dir``. Returns {name: its PNG file}."""
     builders = {
         f"next_experiment_{number}": lambda prediction=prediction: _proposal(prediction)
         for number, prediction in enumerate(predictions, start=1)
@@ -174,8 +174,10 @@ def _on_cpu(samples, split):
     return samples, split, torch.cat([split.train, split.val, split.test]).sort().values
 
 
-def _drawn(output_dir: Path, builders: dict, progress) -> dict:
-    """Each builder's figure, saved as PNG into ``output_dir``; one that matplotlib cannot draw is said in a line."""
+def _drawn(output_dir: Path, builders: dict, progress) -> dict[str, Path]:
+    """Each builder's figure, saved as PNG into ``output_dir``: {name: its file}; one that matplotlib cannot draw is
+    said in a line. The files, not the figures: the figures drawn aside came back pickled, 11 MB for the demo's,
+    pickled in the child and unpickled in the run's own process (0.1 s there) for figures it only names."""
     figures = {}
     for name, build in builders.items():
         try:
@@ -186,7 +188,7 @@ def _drawn(output_dir: Path, builders: dict, progress) -> dict:
             plt.close("all")
             continue
         plt.close(figure)
-        figures[name] = figure
+        figures[name] = figure_file(output_dir, name)
     return figures
 
 
