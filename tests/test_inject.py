@@ -189,7 +189,19 @@ def test_the_recordings_own_strength_is_the_one_their_diagnosis_fitted_and_profi
     not_physical = native_strength(
         None, "solid_viscosity", 60, None, replace(recorded, alone=-2.37, alone_interval=None)
     )
-    assert not_physical.value == not_physical.absent == 0.0
+    assert not_physical.value is None and not_physical.words().endswith("own fit of gamma failed or is not physical")
+
+
+def test_an_own_strength_fitted_where_the_term_does_nothing_is_read_over_not_read_whole():
+    # A real PAAm place at two speeds fitted "alpha fitted alone: 0 (95%: 0 to 0.0109)" as recorded, physical: an
+    # own compared with the strength that removes the term by value had been said to have failed or not to be
+    # physical, and a size found "over the recordings' own" where it had been read whole.
+    at_zero = Own("alpha", 0.0, 0.0, [0.0, 0.0109])
+    assert at_zero.words() == "a size found is read over the recordings' own alpha 0 (95%: 0 to 0.0109)"
+    named = Trial(1.0, 0.0319, 31.7, "weak", 0.0296, [0.02, 0.04], False, True)
+    assert named.verdict(at_zero).endswith("; 0.0296 over the recordings' own, 0.928× the size added")
+    assert named.verdict(Own("alpha", None)).endswith("; read whole, 0.928× the size added")
+    assert Own("alpha", None).beyond(0.0296) == 0.0296 and Own("M", None, math.inf).beyond(1.0e4) == 1.0e4
 
 
 def test_a_term_read_as_another_it_cannot_be_told_from_says_so():
@@ -228,7 +240,7 @@ def test_a_size_found_of_a_term_that_vanishes_as_its_strength_grows_adds_in_its_
     assert named.verdict(own).endswith(
         f"; {beyond:.3g} over the recordings' own, {1.07e4 / beyond:.3g}× the size added"
     )
-    assert own.beyond(3e6) is None and Own("M", math.inf, math.inf).beyond(1e4) == pytest.approx(1e4)
+    assert own.beyond(3e6) is None and Own("M", None, math.inf).beyond(1e4) == pytest.approx(1e4)
     weaker = Trial(1.0, 1.07e4, 64.7, "weak", 3e6, [2e6, 4e6], False, True)
     assert weaker.verdict(own).endswith(
         "; the recordings as they are fit M 2.05e+06: the size found is not read over it"
@@ -239,10 +251,10 @@ def test_a_size_found_of_a_term_that_vanishes_as_its_strength_grows_adds_in_its_
     assert relaxation.verdict(Own("g", 1.82)).endswith("fit g 1.82: the size found is not read over it")
     # Real PAAm C as recorded, its viscosity fitted at −2.05 Pa·s: "read over gamma none, the recordings' own".
     assert (
-        Own("gamma", 0.0).words()
+        Own("gamma", None).words()
         == "a size found is read whole: the recordings' own fit of gamma failed or is not physical"
     )
-    assert Own("M", math.inf, math.inf).words().endswith("the recordings' own fit of M failed or is not physical")
+    assert Own("M", None, math.inf).words().endswith("the recordings' own fit of M failed or is not physical")
     assert Own("M", 2.05e6, math.inf).words() == "a size found is read over the recordings' own M 2.05e+06"
 
 

@@ -51,13 +51,16 @@ BASE_PERMEABILITY = (
 )
 
 
+FAILED = "failed or is not physical"  # a term's own fit where no strength is read from it
+
+
 @dataclass(frozen=True)
 class Own:
     """The term's strength the recordings fit as they are (``native_strength``): they hold some of any term's
     shape already (below the naming threshold, or a model error it projects onto), and a size added adds to it."""
 
     strength: str  # the term's strength parameter (its first)
-    value: float  # the strength fitted; ``absent`` where that fit fails or is not physical
+    value: float | None  # the strength fitted; None where that fit failed or is not physical (read from ``absent``)
     absent: float = 0.0  # the strength at which the term does nothing (``Parameter.absent``)
     interval: list[float | None] | None = None  # its 95% profile interval (None: not profiled, or ``misses_data``)
     misses_data: bool = False  # the value is that of a model that leaves structure, which no interval bounds
@@ -68,10 +71,11 @@ class Own:
         strength whose 1/M is the difference of the two. None where ``found`` is no stronger than the own: the
         recordings as they are fit the term in another shape (bench-set p04: g 1.8 at tau 542 s, against 0.058
         at 0.11 s with g 0.064 added at 0.1 s), and the added size is not read over that."""
+        own = self.absent if self.value is None else self.value
         if self.absent != math.inf:
-            excess = found - self.value
+            excess = found - own
             return excess if excess > 0 else None
-        excess = 1.0 / found - 1.0 / self.value
+        excess = 1.0 / found - 1.0 / own
         return 1.0 / excess if excess > 0 else None
 
     def share(self, beyond: float, added: float) -> float:
@@ -84,15 +88,19 @@ class Own:
         return f"the recordings as they are fit {self.fitted()}: the size found is not read over it"
 
     def words(self) -> str:
-        """What a size found is read over, in words."""
-        if self.value == self.absent:
-            return f"a size found is read whole: the recordings' own fit of {self.strength} failed or is not physical"
+        """What a size found is read over, in words. A physical fit where the term does nothing is an own of that
+        value, not a failed fit (a real PAAm place: "alpha fitted alone: 0 (95%: 0 to 0.0109)" had been said to
+        have failed or not to be physical, the two compared by value)."""
+        if self.value is None:
+            return f"a size found is read whole: the recordings' own fit of {self.strength} {FAILED}"
         return f"a size found is read over the recordings' own {self.fitted()}"
 
     def fitted(self) -> str:
         """The strength the recordings fit, as the data fix it: a size found is read over the value, so the value is
         said, beside its 95% interval, or what the data say of it where they do not close it (bench-set p04 as
         recorded: "g 0.0651", a bare value the data may not fix)."""
+        if self.value is None:
+            return f"no {self.strength} (their fit {FAILED})"
         value = f"{self.strength} {self.value:.3g}"
         if self.interval is None and not self.misses_data:
             return value
@@ -164,7 +172,8 @@ class Trial:
             else:  # beside the size added, whatever it is (real agarose B named a solid relaxation beside structure
                 # no term explains at g 1.41e+03 for the 0.546 added)
                 share = own.share(beyond, self.added)
-                size = f"; {number(beyond, '.3g')} over the recordings' own, {share:.3g}× the size added"
+                over = "read whole" if own.value is None else f"{number(beyond, '.3g')} over the recordings' own"
+                size = f"; {over}, {share:.3g}× the size added"
         beside = f"; beside it {self._listed()}{self._as_recorded()}" if self.others else ""
         return f"named ({self.confidence}), {strength} {found}{size}{beside}"
 
@@ -580,16 +589,16 @@ def native_strength(prepared: Prepared, term: str, iterations: int, base_fit: Ph
         return Own(strength, as_recorded.found, absent, list(as_recorded.interval), as_recorded.unexplained)
     if as_recorded.candidate:  # profiled where that fit is physical (``_profiling``), else failed or not physical
         if as_recorded.alone_interval is None and not as_recorded.alone_misses_data:
-            return Own(strength, absent, absent)
+            return Own(strength, None, absent)
         interval = None if as_recorded.alone_misses_data else list(as_recorded.alone_interval)
         return Own(strength, as_recorded.alone, absent, interval, misses_data=as_recorded.alone_misses_data)
     samples, train = prepared.samples, prepared.split.train
     try:
         fit = fit_with_starts(prepared.make_model, (term,), samples, train, iterations, base_fit)
     except FitError:
-        return Own(strength, absent, absent)
+        return Own(strength, None, absent)
     if not fit.physical:
-        return Own(strength, absent, absent)
+        return Own(strength, None, absent)
     # the structure test on the term fitted alone is the diagnosis's (``Trial.alone_misses_data``)
     interval = parameter_interval(fit, term, strength, samples, train)
     return Own(strength, fit.params[term][strength], absent, interval, as_recorded.alone_misses_data)
