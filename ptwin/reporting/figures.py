@@ -176,8 +176,8 @@ def _on_cpu(samples, split):
 
 def _drawn(output_dir: Path, builders: dict, progress) -> dict[str, Path]:
     """Each builder's figure, saved as PNG into ``output_dir``: {name: its file}; one that matplotlib cannot draw is
-    said in a line. The files, not the figures: the figures drawn aside came back pickled, 11 MB for the demo's,
-    pickled in the child and unpickled in the run's own process (0.1 s there) for figures it only names."""
+    said in a line. The files, not the figures: the figures drawn aside came back pickled, 8.1 MB for the demo's,
+    pickled in the children and unpickled in the run's own process (0.08 s there) for figures it only names."""
     figures = {}
     for name, build in builders.items():
         try:
