@@ -33,7 +33,7 @@ from ptwin.pipeline.identify import Identification, identify, per_curve_fits
 from ptwin.pipeline.prepare import Prepared, fitted_samples, prepare
 from ptwin.pipeline.settings import Settings
 from ptwin.pipeline.twin import TwinAside
-from ptwin.reporting.figures import diagnosis_figures, figure_file, in_paper_order, proposal_figures, stage_figures
+from ptwin.reporting.figures import diagnosis_figures, in_paper_order, proposal_figures, stage_figures
 from ptwin.reporting.report import print_summary
 from ptwin.reporting.results import (
     apparent_record,
@@ -118,9 +118,8 @@ def run(settings: Settings, output_dir: Path, progress: Callable[[str], None] = 
         "seed": settings.seed,
     }
     hybrid = results["stages"]["hybrid"]
-    images = {name: figure_file(output_dir, name) for name in figures}
     metrics = {"hparam/val_rmse": hybrid["val_rmse"], "hparam/test_rmse": hybrid["test_rmse"]}
-    write_summary(output_dir / "tensorboard", images, hparams, metrics)
+    write_summary(output_dir / "tensorboard", figures, hparams, metrics)
     payload = write_outputs(output_dir, results, diagnosis, figures)
     print_summary(results, payload, progress, diagnosis.permeability)
     progress(f"results in {output_dir} ({results['seconds']:.1f} s)")

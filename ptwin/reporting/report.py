@@ -88,7 +88,7 @@ def write_report(output_dir: Path, results: dict, payload: dict, diagnosis: Diag
     lines += _candidates(diagnosis)
     lines += _fit(payload, diagnosis.permeability) + _chain(results)
     none = "None drawn (`figures=false`, or none could be: the run's output says why)."
-    drawn = [f"![{name}]({name}.png)" for name in figures] or [none]
+    drawn = [f"![{name}]({path.name})" for name, path in figures.items()] or [none]
     lines += ["## Figures", "", *drawn]
     (output_dir / "report.md").write_text("\n".join(lines) + "\n")
 
