@@ -36,7 +36,7 @@ def test_a_gel_without_fluid_force_has_its_plateaus_said_to_be_bounds(fitted_set
     assert all(row["unfixed"] and math.isnan(row["mean"]) for row in apparent.plateau.values())
     assert math.isnan(apparent.slope)
     sentence = _trend(apparent)
-    assert sentence.startswith("The plateau permeability cannot be compared across speeds (fewer than two fitted")
+    assert sentence.startswith("The plateau permeability cannot be compared across speeds (fewer than two speeds")
     assert "no fluid force fixes it: the force is at or below the elastic law, or K at the field's" in sentence
     assert "nan" not in sentence
     fitted = apparent_permeability(base.model, prepared.samples, base.permeability)  # the gel as simulated

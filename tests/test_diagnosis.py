@@ -776,6 +776,14 @@ def test_an_experiment_two_groups_share_is_said_once():
     hold = {"tell_apart": "a hold at constant depth"}
     sentence = _to_tell_apart([hold, dict(hold), {"tell_apart": "a deeper indent"}])
     assert sentence == " To tell them apart, record a hold at constant depth; a deeper indent."
+    # a hint two groups share beside others of their own (real PAAm: a strain-dependent K confounded twice)
+    groups = [{"tell_apart": "a hold; a deeper indent"}, {"tell_apart": "a longer hold; a deeper indent"}]
+    assert _to_tell_apart(groups) == " To tell them apart, record a hold; a deeper indent; a longer hold."
+    # the hints are joined by HINTS and split by it again: no term's own hint may hold it
+    from ptwin.diagnosis.words import HINTS
+    from ptwin.physics.terms import VOCABULARY
+
+    assert not [name for name, term in VOCABULARY.items() if HINTS in term.TELL_APART]
 
 
 def test_a_proposal_must_pass_the_validation_margin_over_everything_recorded():

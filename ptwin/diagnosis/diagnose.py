@@ -35,7 +35,7 @@ from ptwin.diagnosis.null import (
     beyond_model_error,
     structure_test,
 )
-from ptwin.diagnosis.words import MATERIAL, finite_or_none, summarise, times_better
+from ptwin.diagnosis.words import HINTS, MATERIAL, finite_or_none, summarise, times_better
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.hybrid_training import rmse_of
 from ptwin.fitting.physics_fit import PhysicsFit, fitted_difference, held_range, rmse
@@ -756,7 +756,7 @@ def _confound(chosen: tuple[str, ...], other: tuple[str, ...], candidates: dict)
     names = [" + ".join(subset) or "base model" for subset in (chosen, other)]
     return {
         "terms": names,
-        "tell_apart": "; ".join(VOCABULARY[t].TELL_APART for t in differing),
+        "tell_apart": HINTS.join(VOCABULARY[t].TELL_APART for t in differing),
         "permeability": {name: candidates[subset].fit.permeability for name, subset in zip(names, (chosen, other))},
     }
 

@@ -11,6 +11,8 @@ import math
 from ptwin.diagnosis.name import without_structure
 from ptwin.physics.model import PLAUSIBLE_PERMEABILITY, fluid_off
 
+HINTS = "; "  # between the differing terms' hints in a confounded group's 'tell_apart'
+
 MICRO = 1e6
 MATERIAL = 0.02  # a relative difference in K worth saying that K is not fixed
 NO_FLUID = f"at the field's {PLAUSIBLE_PERMEABILITY[1]:.0e} m² limit or beyond"  # where K leaves no fluid force
@@ -189,14 +191,16 @@ def _called(name: str) -> str:
 
 
 def _to_tell_apart(groups: list[dict]) -> str:
-    tell = "; ".join(dict.fromkeys(record for record in map(_record, groups) if record))  # groups may share one
+    """' To tell them apart, record …', each recording once: groups share hints (real PAAm with a strain-dependent
+    K confounded with a relaxation and with a power law read 'a deeper indent (…)' twice)."""
+    tell = HINTS.join(dict.fromkeys(hint for group in groups for hint in _record(group) if hint))
     return f" To tell them apart, record {tell}." if tell else ""
 
 
-def _record(group: dict) -> str:
-    """What to record to tell a confounded group apart: the proposed experiment, else the term's hint."""
+def _record(group: dict) -> list[str]:
+    """What to record to tell a confounded group apart: the proposed experiment, else each differing term's hint."""
     proposal = group.get("next_experiment")
-    return proposal["sentence"] if proposal else group["tell_apart"]
+    return [proposal["sentence"]] if proposal else group["tell_apart"].split(HINTS)
 
 
 def _where(d, ratio: float, test) -> str:
@@ -256,7 +260,11 @@ def _trend(apparent) -> str:
         else ""
     )
     if not (math.isfinite(apparent.slope) and math.isfinite(apparent.slope_std)):
-        return f"The plateau permeability cannot be compared across speeds (fewer than two fitted speeds{beside}). "
+        # the reference's speed says nothing here: a set of two speeds read "fewer than two fitted speeds" (real PAAm)
+        return (
+            "The plateau permeability cannot be compared across speeds (fewer than two speeds besides the reference "
+            f"curve's, whose approach is the elastic law, give a plateau K{beside}). "
+        )
     return (
         f"The plateau permeability changes with speed by {apparent.slope:.2g} m² per decade "
         f"({number(apparent.slope_significance, '.1f')} standard errors{_scatter(apparent)}{beside}). "
