@@ -253,7 +253,13 @@ def test_the_held_out_test_with_samples_pinning_contacts_keeps_its_false_alarm_r
 
 @pytest.mark.parametrize(
     ("gain", "said"),
-    [(37.4, "takes 37 units of χ² off"), (-0.3, "takes 0 units of χ² off"), (-4.2, "adds 4 units of χ² to")],
+    [
+        (37.4, "takes 37 units of χ² off"),
+        (-0.3, "takes 0 units of χ² off"),
+        (-4.2, "adds 4 units of χ² to"),
+        (1.2, "takes 1 unit of χ² off"),  # real PAAm, before contact: "takes 1 units"
+        (-0.7, "adds 1 unit of χ² to"),
+    ],
 )
 def test_a_terms_gain_is_said_as_what_it_takes_off_or_adds_never_a_negative_or_minus_zero(gain, said):
     # Held-out samples can fit worse with the term (real agarose B: -4 on validation, -0 before contact).

@@ -200,7 +200,8 @@ class TermEvidence:
     def words(self) -> str:
         # A fit on the training samples can lose on the others: a negative gain is χ² the term adds there.
         gain = round(self.gain)
-        change = f"takes {gain} units of χ² off" if gain >= 0 else f"adds {-gain} units of χ² to"
+        units = f"{abs(gain)} unit{'' if abs(gain) == 1 else 's'} of χ²"
+        change = f"takes {units} off" if gain >= 0 else f"adds {units} to"
         return (
             f"{self.term} {change} the residual under the noise model, where noise "
             f"and a model error of {MODEL_ERROR:g} noise std give at most {self.threshold:.0f} one time in "
