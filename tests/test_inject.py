@@ -414,6 +414,26 @@ def test_values_that_do_not_match_the_terms_parameters_are_refused_in_one_line()
         InjectSettings("contact_offset", [1e-7])
 
 
+@pytest.mark.parametrize(
+    ("term", "values", "sizes", "said"),
+    [
+        ("solid_viscosity", [-1.0], [1.0], r"gamma -1 is no physical solid_viscosity \(gamma < 0\)"),
+        ("power_law_rheology", [0.3], [1.0, 2.0], r"alpha 0.6 \(inject.sizes 2\) is no physical .* \(alpha ≥ 0.5\)"),
+        ("pore_pressure_relaxation", [0.0], [1.0], r"M 0 is no physical pore_pressure_relaxation \(M ≤ 0\)"),
+        ("solid_relaxation", [0.2, -0.1], [1.0], r"tau -0.1 is no physical solid_relaxation \(tau ≤ 0\)"),
+        ("solid_viscosity", [math.inf], [1.0], r"gamma inf is no physical solid_viscosity \(gamma is not finite\)"),
+    ],
+)
+def test_values_no_material_has_are_refused_in_one_line(term, values, sizes, said):
+    # A viscosity of -1 Pa·s was added to real PAAm and diagnosed ("unexplained"), as if a user could have asked it.
+    from ptwin.pipeline.settings import InjectSettings
+
+    with pytest.raises(ValueError, match=rf"^inject.values: {said}; give values in its physical range") as refused:
+        InjectSettings(term, values, sizes)
+    assert "\n" not in str(refused.value)
+    InjectSettings(term, [abs(v) if math.isfinite(v) and v else 0.1 for v in values], [1.0])  # inside it: taken
+
+
 def test_each_terms_sizes_are_read_off_its_added_force_weak_to_strong(default_set, coarse_cache):
     # The ladder's sizes reach the peaks asked for (bracketed on a grid of the added force, then bisected), the pore
     # term's by a smaller M (its strength grows as M falls).

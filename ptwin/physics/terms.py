@@ -63,6 +63,16 @@ class Parameter:
             return f"{name} → 0"
         return None
 
+    def outside(self, name: str, value: float) -> str | None:
+        """Why ``value`` is no physical value of this parameter ('gamma < 0', 'alpha ≥ 0.5'), or None."""
+        if self.minimum is not None and value < self.minimum:
+            return f"{name} < {self.minimum:g}"
+        if self.maximum is not None and value >= self.maximum:
+            return f"{name} ≥ {self.maximum:g}"
+        if self.log and not value > 0:  # a value fitted in log: positivity is its physics
+            return f"{name} ≤ 0"
+        return None
+
     def raw(self, value: float) -> float:
         """``value`` as it is fitted: its log where the parameter is fitted in log."""
         return math.log(value) if self.log else value
@@ -184,14 +194,8 @@ class Term(nn.Module):
 
     def violation(self) -> str | None:
         """Why the fitted values are not physical, or None."""
-        reasons = []
-        for name, parameter in self.PARAMS.items():
-            value = self.value(name).item()
-            if parameter.minimum is not None and value < parameter.minimum:
-                reasons.append(f"{name} < {parameter.minimum:g}")
-            if parameter.maximum is not None and value >= parameter.maximum:
-                reasons.append(f"{name} ≥ {parameter.maximum:g}")
-        return "; ".join(reasons) or None
+        reasons = (parameter.outside(name, self.value(name).item()) for name, parameter in self.PARAMS.items())
+        return "; ".join(reason for reason in reasons if reason) or None
 
     def law_violation(
         self, law: Callable[[float], float], modulus: Callable[[], float], noise_std: float

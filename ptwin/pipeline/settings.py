@@ -170,6 +170,17 @@ class InjectSettings:
             )
         ]
         refuse_outside(self, rules, "inject.{}".format)
+        # a force no material has would be found or missed for reasons of its own (a viscosity of -1 Pa s was added)
+        params = VOCABULARY[self.term].PARAMS
+        for size in self.sizes:
+            for name, value in self.scaled(size).items():
+                why = params[name].outside(name, value) if math.isfinite(value) else f"{name} is not finite"
+                if why:
+                    at = f" (inject.sizes {size:g})" if size != 1 else ""
+                    raise ValueError(
+                        f"inject.values: {name} {value:g}{at} is no physical {self.term} ({why}); give values in its "
+                        "physical range, the first times each of inject.sizes"
+                    )
 
     def scaled(self, size: float) -> dict[str, float]:
         """The term's parameters by name, its strength (first parameter) times ``size``."""
