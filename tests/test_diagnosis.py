@@ -1448,6 +1448,7 @@ def test_structure_a_term_alone_leaves_as_noise_names_it_weak_though_the_validat
         "model error of 0.15 noise std give at most 10 one time in 100"
     }
     assert pick.notes[-1].startswith("a leaves no structure (whiteness 2.0 against 5) where the base model leaves it")
+    assert pick.notes[-1].endswith("not beyond what noise and model error give (why it was pruned): named, weak")
     held_out.test = ABOVE_FIVE
     assert _rivals(candidates, pick, DiagnosisSettings(terms=[]), held_out) == [("c",)]
     verdict = grade(600.0, ["c"], None, HeldOut(1.5, {}, 3), 10.0, 0.1, unproven=pick.unproven["a"])

@@ -509,7 +509,10 @@ def _explains_alone(
         if not validation.beyond:
             unproven[term] = validation.words()
     # every term beyond the noise there too: pruned from a larger subset on the way down, it stands on its own
-    how = ", though not beyond what noise and model error give: named, weak" if unproven else ": named"
+    # after the notes of its pruning, which the reader has just read (real PAAm: "pruned: …" then "named, weak")
+    how = ": named"
+    if unproven:
+        how = ", though not beyond what noise and model error give (why it was pruned): named, weak"
     why = (
         f"{' + '.join(best.terms)} leaves no structure ({test.words(best.whiteness)}) where the base model leaves "
         f"it, and predicts the validation samples better{how}"
