@@ -308,8 +308,6 @@ def detection_limits(
             progress(f"  [{i}/{len(terms)}] {term}: {ALREADY} ({recorded.confidence}), {held}; not added")
             continue
         ladder = _ladder(prepared, term, base_fit)
-        if not ladder:  # the table says so too (``limits_section``)
-            progress(f"  [{i}/{len(terms)}] {term}: {_reach(LADDER[0], strength)}: not added")
         for peak, params in ladder:
             folder = output_dir / f"{term}-peak-{peak:g}"
             trial = _added(settings, prepared, base_fit, as_recorded, term, params, folder)
@@ -320,6 +318,10 @@ def detection_limits(
             )
             if trial.confidence:
                 break
+        else:  # never named: a ladder cut short says where it stops, as the table does (``limits_section``)
+            if len(ladder) < len(LADDER):
+                stop = "no larger size tried" if ladder else "not added"
+                progress(f"  [{i}/{len(terms)}] {term}: {_reach(LADDER[len(ladder)], strength)}: {stop}")
     _append(output_dir, limits_section(found, native, already) + _full(as_recorded, settings))
     return found
 
