@@ -1,7 +1,7 @@
 """python -m ptwin.inject data.path=SET inject.term=TERM inject.values=[…] inject.sizes=[…] [overrides]
 python -m ptwin.inject data.path=SET inject.term=all [overrides]
 
-What the user's own recordings could have shown: the term added to them at first order through the
+What the user's own recordings could have shown: the term added to them through the
 cantilever balance (everything else as recorded; method and limits in ``ptwin.pipeline.inject``), at
 each size, and diagnosed as ``train.py`` would. Writes ``as-recorded/`` (the recordings' own run, its
 report.md ending with the section on what they could have shown) and ``size-<s>/`` (the recordings

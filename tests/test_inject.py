@@ -1,4 +1,4 @@
-"""What a set could have shown: a known term added to recordings at first order through the cantilever balance,
+"""What a set could have shown: a known term added to recordings through the cantilever balance,
 found with its size; and on data ptwin did not write (a shared development set with real PAAm noise)."""
 
 import json
@@ -14,7 +14,8 @@ from hydra import compose, initialize_config_dir
 
 from ptwin.app import register, typed
 from ptwin.data.recordings import load_recordings
-from ptwin.physics.elastic import hertz_stiffness
+from ptwin.fitting.physics_fit import fit_with_starts
+from ptwin.physics.samples import Samples
 from ptwin.pipeline.inject import (
     BASE_PERMEABILITY,
     LADDER,
@@ -28,7 +29,6 @@ from ptwin.pipeline.inject import (
     native_strength,
 )
 from ptwin.pipeline.prepare import prepare
-from ptwin.synth.simulator import Experiment
 from tests.conftest import CONFIGS, OPEN_DATA, needs_open_data, simulated_set
 
 QUICK = ("optim.hybrid.regularisations=[1.0e-2]", "optim.hybrid.iterations=10")
@@ -42,23 +42,36 @@ def inject_settings(folder, cache, *overrides):
     return typed(cfg)
 
 
-def test_a_viscous_force_added_reaches_the_recording_through_the_cantilever_balance(default_set, coarse_cache):
-    # πγRU at the tip; the recording sees k/(k + s) of it, s the contact stiffness: less where the sample is stiff.
-    settings = inject_settings(default_set, coarse_cache)
-    prepared = prepare(settings, progress=lambda _: None)
-    added = added_force(prepared, "solid_viscosity", {"gamma": 5.0})
-    fast = next(c for c in prepared.curves if c.curve == "v80")
-    shown = added["v80"]
-    contact = fast.in_contact
-    assert np.all(shown[fast.depth <= 0] == 0.0)  # no contact radius, no viscous force
-    tip = np.pi * 5.0 * fast.contact_radius[contact] * fast.velocity[contact]
-    ratio = shown[contact] / tip
-    # s = dF/dw of the set's sphere, 2E*√(ρw), read off the law (the slow reference's own Darcy force adds ~1%).
-    experiment = Experiment()
-    sphere = hertz_stiffness(fast.depth[contact], experiment.effective_modulus, experiment.probe_radius)
-    share = 1.0 / (1.0 + sphere / prepared.recordings.meta.spring_constant)
-    assert share.min() < 0.95  # the sample takes a share that matters here ...
-    assert ratio == pytest.approx(share, rel=0.01, abs=0)  # ... and the recording shows the rest
+@pytest.mark.parametrize(("term", "params"), [("solid_viscosity", {"gamma": 5.0}), ("cantilever_drag", {"b": 5e-4})])
+def test_a_term_added_is_the_force_the_cantilever_balance_gives_with_it(
+    tmp_path, coarse_cache, monkeypatch, term, params
+):
+    # The simulator solves the balance k_c(z − w) = F(w, …) + ΔF at each z: the same set simulated with the term and
+    # without it (the same noise) differ by the force a recording shows of it, less than ΔF where the sample takes a
+    # share (a soft cantilever here, k_c 0.3 N/m against up to 1.1 for the sample). At first order (ΔF over the gain
+    # 1 + s/k_c at the recorded depth) the viscosity was 0.41 of the noise std off in rms, the drag 2.9; solved by
+    # Newton's method, the depth following the force, 0.049 and 0.38.
+    import ptwin.pipeline.inject as inject
+
+    common = dict(base_speeds=(0.5e-6, 4e-6, 20e-6, 80e-6), samples=600, spring_constant=0.3)
+    without = simulated_set(tmp_path / "without", **common)
+    exact = load_recordings(simulated_set(tmp_path / "with", **common, effects={term: params})).curves["force"]
+    exact = exact.to_numpy() - load_recordings(without).curves["force"].to_numpy()
+    prepared = prepare(inject_settings(without, coarse_cache), progress=lambda _: None)
+    base = fit_with_starts(prepared.make_model, (), prepared.samples, prepared.split.train)
+    ids = prepared.recordings.curves["curve"].unique()
+
+    def error(added):
+        return np.sqrt(np.mean((np.concatenate([added[c] for c in ids]) - exact) ** 2)) / prepared.noise.std
+
+    solved = added_force(prepared, term, params, base)
+    if term == "solid_viscosity":  # no contact radius, no viscous force, whatever the balance
+        samples = Samples.from_curves(prepared.curves)
+        free = (samples.depth <= 0).numpy()
+        assert np.all(np.concatenate([solved[c] for c in samples.curve_ids])[free] == 0.0)
+    monkeypatch.setattr(inject, "BALANCE_STEPS", 0)  # the first order alone
+    first = added_force(prepared, term, params, base)
+    assert error(solved) < 0.2 * error(first)
 
 
 def test_a_term_added_starts_where_the_elastic_force_does_whatever_the_reference_correction(tmp_path, coarse_cache):
@@ -66,7 +79,6 @@ def test_a_term_added_starts_where_the_elastic_force_does_whatever_the_reference
     # it wanders within the onset (62 nm before it on bench-set p03). A viscosity added from there would push on
     # samples the recording shows free of the sample.
     from ptwin.fitting.physics_fit import fit_physics
-    from ptwin.physics.samples import Samples
 
     folder = simulated_set(tmp_path / "set", contact_point="estimate", z_start=-1e-6)
     prepared = prepare(inject_settings(folder, coarse_cache), progress=lambda _: None)
@@ -335,7 +347,7 @@ def viscosity_added_to_real_curves(tmp_path: Path, material: str, files: list[st
 @needs_open_data("PAAM hydrogel")
 def test_a_viscosity_added_to_a_real_paam_spot_is_named_with_its_size(tmp_path):
     # Real recordings that ptwin did not write (Abuhattum et al. 2022, PAAm): one spot at 5 and 15 µm/s, 5 Pa·s
-    # added at first order through the cantilever balance, everything else real. Named with its size over the
+    # added through the cantilever balance, everything else real. Named with its size over the
     # recordings' own (6.10 over 0.001, weak beside unexplained structure, since the law is 0 before contact;
     # 5.5 over 0.59 before), with the default basis and the whole chain.
     files = ["speed 5/PAA_speed 5_4nN_3.tab", "speed 15/PAA_speed 15_4nN.tab"]
