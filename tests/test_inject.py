@@ -74,6 +74,31 @@ def test_a_term_added_is_the_force_the_cantilever_balance_gives_with_it(
     assert error(solved) < 0.2 * error(first)
 
 
+def test_a_balance_step_the_model_cannot_evaluate_leaves_the_force_added_at_the_step_before(
+    default_set, coarse_cache, monkeypatch
+):
+    # A later step moves the depth (deeper, for a force that lowers it): a model that refuses it there (the fluid
+    # layer off its grid) ends the steps, and the force added is the last one evaluated, here the first order.
+    import ptwin.pipeline.inject as inject
+
+    prepared = prepare(inject_settings(default_set, coarse_cache), progress=lambda _: None)
+    base = fit_with_starts(prepared.make_model, (), prepared.samples, prepared.split.train)
+    monkeypatch.setattr(inject, "BALANCE_STEPS", 0)
+    first = added_force(prepared, "solid_viscosity", {"gamma": 5.0}, base)
+    monkeypatch.setattr(inject, "BALANCE_STEPS", 8)
+    calls, total = [], inject.total
+
+    def refusing(forces):
+        calls.append(1)
+        if len(calls) > 2:  # the recorded depth and the first order's are evaluated; no later depth
+            raise ValueError("off the fluid layer's grid")
+        return total(forces)
+
+    monkeypatch.setattr(inject, "total", refusing)
+    kept = added_force(prepared, "solid_viscosity", {"gamma": 5.0}, base)
+    assert all(np.array_equal(kept[c], first[c]) for c in first) and np.abs(first["v80"]).max() > 0
+
+
 def test_a_term_added_starts_where_the_elastic_force_does_whatever_the_reference_correction(tmp_path, coarse_cache):
     # The reference's own contact correction is a nuisance only the rate forces see; where the data do not pin it,
     # it wanders within the onset (62 nm before it on bench-set p03). A viscosity added from there would push on

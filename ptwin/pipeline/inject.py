@@ -255,8 +255,11 @@ def added_force(
     added = -mismatch / gain  # first order: ΔF over the gain
     kept, worst = added, math.inf
     for _ in range(BALANCE_STEPS):
-        mismatch, gain = unbalanced(added)
-        if mismatch.abs().max().item() >= worst:  # no nearer the balance than the step before: that one is kept
+        try:
+            mismatch, gain = unbalanced(added)
+        except (ValueError, RuntimeError):  # a depth off the model's reach (the fluid layer's grid)
+            mismatch = torch.full_like(added, math.nan)
+        if not mismatch.abs().max().item() < worst:  # no nearer the balance than the step before: that one is kept
             added = kept
             break
         kept, worst = added, mismatch.abs().max().item()
