@@ -613,7 +613,7 @@ def no_candidate(term: str, trials: list[Trial], listed: list[str]) -> str | Non
         reason = "it is not among diagnosis.terms"
     else:
         reason = VOCABULARY[term].WITH_ESTIMATED_CONTACT or "diagnosis.max_terms is 0: no term is fitted"
-    return f"{term} was no candidate in these recordings ({reason}): they cannot show it at any size"
+    return f"{term} was no candidate in these recordings ({reason}): no size of it can be named in them"
 
 
 def native_strength(prepared: Prepared, term: str, iterations: int, base_fit: PhysicsFit, as_recorded: Trial) -> Own:
