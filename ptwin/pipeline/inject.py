@@ -1,33 +1,36 @@
 """What a recording set could have shown: a known term added to the user's own recordings, the rest real.
 
-Method. The base model, K fitted on the set's training samples, gives the term's force ΔF on each
-curve's recorded history: every rate force with the term minus without it, on the elastic force of
-the base model's law (the hereditary terms act on it), at the base fit's contact corrections. Its
-rate forces start where its elastic force does: the reference curve's own correction, a nuisance only
-the rate forces see (``ptwin.physics.contact``), is not applied. Where the data do not pin it, it
-wanders within the reference's onset, and a term added there would act where the recording has no
-force (bench-set p03: 62 nm before the onset, so a viscosity pushed on samples before contact, and
-the diagnosis could fit only half of it). A
-force added at the tip does not reach the recording whole: cantilever and sample share it. The balance
-k_c·(z − w) = F(w, …) with z as recorded is solved for the force δF the recording shows more: the model
-with the term at the depth that force leaves, w' = w − δF/k_c, less the model without it at the recorded
-depth, is δF. Newton's method from δF = 0, each step the mismatch over the gain 1 + s/k_c (s = dF/dw the
-law's stiffness: ``ReferenceCurve.noise_gain``); its first step is the first order, ΔF·k_c/(k_c + s) (0
-before contact: all of ΔF is deflection there), and each later one evaluates the model at the depth the
-last leaves. On real PAAm and agarose the first order was off the balance by up to 2.9× the noise std (a
-drag of 1.5 nN; 0.6× for a viscosity of 5 Pa·s), and three to five steps bring it within a thousandth; on
-sets simulated with the term (the simulator solves the balance) the force added comes 8× nearer the
-truth in rms (``tests/test_inject.py``). δF is added to the recorded force; z, time and the noise stay as
-recorded, and the depth follows (w = z − F/k_c).
+Method. The base model, K fitted on the set's training samples, gives the term's force ΔF on each curve's
+recorded history: every rate force with the term minus without it, on the elastic force of the base model's
+law (the hereditary terms act on it), at the base fit's contact corrections. Its rate forces start where its
+elastic force does: the reference curve's own correction, a nuisance only the rate forces see
+(``ptwin.physics.contact``), is not applied. Where the data do not pin it, it wanders within the reference's
+onset, and a term added there would act where the recording has no force (bench-set p03: 62 nm before the
+onset, so a viscosity pushed on samples before contact, and the diagnosis could fit only half of it). A force
+added at the tip does not reach the recording whole: cantilever and sample share it. The balance k_c·(z − w) =
+F(w, ẇ, …) with z as recorded is solved for the force δF the recording shows more: the model with the term
+where that force leaves the sample (depth w' = w − δF/k_c, its rate ẇ' = ẇ − δḞ/k_c), less the model without
+it at the recorded depth and rate, is δF. Newton's method from δF = 0 (``_Balance``): a sample's mismatch
+moves with its own δF through the depth (the gain 1 + s/k_c, s = dF/dw the law's stiffness:
+``ReferenceCurve.noise_gain``) and the rate (∂F/∂ẇ over k_c·Δt), and with the sample's before through the
+rate, a lower bidiagonal system along each curve. Its first order, ΔF·k_c/(k_c + s) (0 before contact: all of
+ΔF is deflection there), was off the balance on real PAAm by up to 2.9× the noise std (a drag of 1.5 nN; 0.6×
+for a viscosity of 5 Pa·s, 1.4× for a power law), and three to five steps bring it within a thousandth of it
+(a pore relaxation's, below: 0.005 after eight). On sets simulated with the term (the simulator solves the
+balance) the force added comes 40× nearer the truth in rms than the first order (0.010 of the noise std for a
+viscosity whose peak is 9× the noise, 0.070 for a drag; ``tests/test_inject.py``): Newton on the depth alone,
+the rate left as recorded, stopped at 0.049 and 0.38, and with the rate moved but left out of the system it
+diverged (the fluid's damping over k_c outlasting a sample's interval). δF is added to the recorded force; z,
+time and the noise stay as recorded, and the depth follows (w = z − F/k_c).
 
-Limits. The depth's rate changes too, by δF's own rate over k_c, and the rate forces see it; it is left at
-the recording's (its steps diverge where the fluid's damping over k_c outlasts a sample's interval): what
-the simulated sets' force added keeps off the truth, 0.05 of the noise std in rms for a viscosity of 9×
-the noise. The recording's own residual (its noise and what the model misses) stays at the recorded depth
-and does not move with it. The term adds to whatever the
-recordings hold already, so each size is read against the diagnosis of the recordings as they are.
-It is added on the base model's K, even where the data do not fix K. A term no force added can stand for
-(``Term.NOT_INJECTED``: a contact offset, which moves where the recorded force starts) is not added.
+Limits. A force that answers the rate with a lag (a pore relaxation) enters the steps by its response to a
+lasting change of rate, more than its instant one: its steps converge slowly, and on a soft cantilever one was
+3× the noise std off the balance after six (0.23 in rms against the simulator, 0.34 at first order). The
+recording's own residual (its noise and what the model misses) stays at the recorded depth and does not move
+with it. The term adds to whatever the recordings hold already, so each size is read against the diagnosis of
+the recordings as they are. It is added on the base model's K, even where the data do not fix K. A term no
+force added can stand for (``Term.NOT_INJECTED``: a contact offset, which moves where the recorded force
+starts) is not added.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import scipy.linalg
 import torch
 
 from ptwin.data.recordings import write_recordings
@@ -216,7 +220,7 @@ class Trial:
         return f"; {' + '.join(self.recorded)} as in the recordings as they are"
 
 
-BALANCE_STEPS = 8  # Newton steps on the cantilever balance at most (three to five reach the noise's thousandth)
+BALANCE_STEPS = 8  # Newton steps on the cantilever balance after the first, at most (the module docstring)
 
 
 def added_force(
@@ -232,43 +236,67 @@ def added_force(
             base.contact.reference.zero_()  # every force from where the elastic force starts (the module docstring)
     with_term = prepared.make_model((term,), {term: params}, fit.permeability)
     with_term.contact = base.contact  # the base fit's contact corrections
-    samples = Samples.from_curves(prepared.curves).to(prepared.samples.time.device)
-    spring = prepared.recordings.meta.spring_constant
-
-    def sample_force(model, added: torch.Tensor) -> tuple[torch.Tensor, np.ndarray]:
-        """The model's force [N] where a force ``added`` leaves each sample (w = z − F/k_c), and that depth."""
-        moved = replace(samples, depth=samples.depth - added / spring)
-        with torch.no_grad():
-            depth = base.depth(moved)
-            elastic = base.elastic(depth)
-            return elastic + total(model.rate_forces(moved, elastic)), depth.cpu().numpy()
-
-    recorded, _ = sample_force(base, torch.zeros_like(samples.force))
-
-    def unbalanced(added: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """How far the balance is from holding with the term where ``added`` [N] is added (0 where it holds), and
-        the gain 1 + s/k_c at the depth that leaves: Newton's step is the first over the second."""
-        force, depth = sample_force(with_term, added)
-        return added - (force - recorded), torch.from_numpy(prepared.noise_gain(depth)).to(added)
-
-    mismatch, gain = unbalanced(torch.zeros_like(samples.force))
-    added = -mismatch / gain  # first order: ΔF over the gain
-    kept, worst = added, math.inf
+    balance = _Balance(prepared, base, with_term)
+    added = balance.newton(torch.zeros_like(balance.samples.force))[1]  # from nothing: the linear answer
+    kept, worst = None, math.inf
     for _ in range(BALANCE_STEPS):
         try:
-            mismatch, gain = unbalanced(added)
+            mismatch, step = balance.newton(added)
         except (ValueError, RuntimeError):  # a depth off the model's reach (the fluid layer's grid)
-            mismatch = torch.full_like(added, math.nan)
-        if not mismatch.abs().max().item() < worst:  # no nearer the balance than the step before: that one is kept
-            added = kept
+            mismatch = step = torch.full_like(added, math.nan)
+        if not mismatch.abs().max().item() < worst:  # no nearer the balance (or off it): the step before is kept
+            added = added if kept is None else kept
             break
         kept, worst = added, mismatch.abs().max().item()
-        step = mismatch / gain
-        added = added - step
+        added = added + step
         if step.abs().max().item() <= 1e-3 * prepared.noise.std:
             break
-    measured, curve = added.cpu().numpy(), samples.curve.cpu().numpy()
-    return {curve_id: measured[curve == i] for i, curve_id in enumerate(samples.curve_ids)}
+    measured, curve = added.cpu().numpy(), balance.samples.curve.cpu().numpy()
+    return {curve_id: measured[curve == i] for i, curve_id in enumerate(balance.samples.curve_ids)}
+
+
+class _Balance:
+    """The cantilever balance with a term added, k_c·(z − w) = F(w, ẇ, …), z as recorded: how far a force added
+    δF [N] leaves it from holding, and Newton's step towards it (the module docstring)."""
+
+    def __init__(self, prepared: Prepared, base, with_term):
+        self.prepared, self.base, self.with_term = prepared, base, with_term
+        self.samples = Samples.from_curves(prepared.curves).to(prepared.samples.time.device)
+        self.spring = prepared.recordings.meta.spring_constant
+        time, start = self.samples.time, self.samples.start
+        self.interval = torch.where(start, math.inf, time - time.roll(1))  # [s] since the sample before, in a curve
+        self.recorded = self._force(self.base, self.samples)[0]
+        self.nudge = 1e-3 * max(self.samples.velocity.abs().max().item(), 1e-9)  # [m/s] for ∂F/∂ẇ
+
+    def _force(self, model, samples: Samples) -> tuple[torch.Tensor, torch.Tensor]:
+        """The model's force [N] on ``samples``, on the base model's elastic law, and their depth [m]."""
+        with torch.no_grad():
+            depth = self.base.depth(samples)
+            elastic = self.base.elastic(depth)
+            return elastic + total(model.rate_forces(samples, elastic)), depth
+
+    def moved(self, added: torch.Tensor) -> Samples:
+        """The samples where a force ``added`` [N] leaves them: the depth w = z − F/k_c, its rate by the
+        differences a sample's from the one before (backward Euler, as the step's solve)."""
+        shift = added / self.spring
+        rate = torch.where(self.samples.start, 0.0, (shift - shift.roll(1)) / self.interval)
+        return replace(self.samples, depth=self.samples.depth - shift, velocity=self.samples.velocity - rate)
+
+    def newton(self, added: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(How far from the balance ``added`` is, 0 where it holds; Newton's step from it) [N]. A sample's
+        mismatch moves with its own δF through the depth (the gain 1 + s/k_c) and through the depth's rate (∂F/∂ẇ
+        over k_c·Δt), and with the sample's before through the rate: a lower bidiagonal system, solved along each
+        curve: with the rate in it, the steps converge where the fluid's damping over k_c outlasts a sample's
+        interval."""
+        samples = self.moved(added)
+        force, depth = self._force(self.with_term, samples)
+        mismatch = added - (force - self.recorded)
+        faster = replace(samples, velocity=samples.velocity + self.nudge)
+        lag = (self._force(self.with_term, faster)[0] - force) / self.nudge / (self.spring * self.interval)
+        gain = torch.from_numpy(self.prepared.noise_gain(depth.cpu().numpy())).to(added)
+        bands = torch.stack([gain + lag, -lag.roll(-1).where(~self.samples.start.roll(-1), 0.0)]).cpu().numpy()
+        step = scipy.linalg.solve_banded((1, 0), bands, -mismatch.cpu().numpy())
+        return mismatch, torch.from_numpy(step).to(added)
 
 
 def write_injected(
