@@ -391,11 +391,12 @@ def test_a_viscosity_added_to_a_real_agarose_spot_is_fitted_with_its_size_but_no
 ):
     # Real agarose (Abuhattum et al. 2022), five curves at 5, 10 and 15 µm/s at one position of three map sessions
     # (import_afm says so: three places): the recordings as they are leave structure no term explains. With 5 Pa·s added
-    # the viscosity fitted alone finds its size (4.76 over the recordings' own 0.61). From stop 75 (the removed
-    # baselines' line errors fitted) to stop 76 it was named weak beside that structure, but it predicted the curves
-    # left out of the fit 1.16× worse (1.03× better read less the baselines' lines) and the test samples 0.99× as well
-    # as the base model: a term that leaves structure is named only where it predicts curves left out better by the
-    # held-out margin, and the report says why it is not.
+    # the viscosity fitted alone finds its size (4.38 over the recordings' own 0.61; 4.76 with the force added at
+    # first order). From stop 75 (the removed baselines' line errors fitted) to stop 76 it was named weak beside that
+    # structure, but it predicted the curves left out of the fit 1.16× worse (1.03× better read less the baselines'
+    # lines) and the test samples 0.99× as well as the base model: a term that leaves structure is named only where
+    # it predicts curves left out better by the held-out margin, and the report says why it is not. With the force
+    # added solved from the balance (stop 98) it falls earlier, on the validation samples (6 units of χ² where 14).
     files = [
         "speed 5/Agarose_speed 5_2nN.tab",
         "speed 5/Agarose_speed 5_2nN_1.tab",
@@ -407,7 +408,8 @@ def test_a_viscosity_added_to_a_real_agarose_spot_is_fitted_with_its_size_but_no
     own = max(as_recorded.alone, 0.0)
     assert added.unexplained and not added.confidence
     assert added.alone - own == pytest.approx(5.0, rel=0.4)
-    assert any("on curves left out of the fit solid_viscosity predicts" in why for why in added.why)
+    said = ("on curves left out of the fit solid_viscosity predicts", "solid_viscosity pruned: removing it costs")
+    assert any(reason in why for why in added.why for reason in said)
 
 
 # One position of one agarose map session (Abuhattum et al. 2022) at 5, 10 and 15 µm/s.
