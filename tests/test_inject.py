@@ -48,7 +48,7 @@ def test_a_term_added_is_the_force_the_cantilever_balance_gives_with_it(
 ):
     # The simulator solves the balance k_c(z − w) = F(w, …) + ΔF at each z: the same set simulated with the term and
     # without it (the same noise) differ by the force a recording shows of it, less than ΔF where the sample takes a
-    # share (a soft cantilever here, k_c 0.3 N/m against up to 1.1 for the sample). At first order (ΔF over the gain
+    # share (a soft cantilever here, k_c 0.3 N/m against up to 0.23 for the sample). At first order (ΔF over the gain
     # 1 + s/k_c at the recorded depth) the viscosity was 0.41 of the noise std off in rms, the drag 2.9 (one linear
     # step with the depth's rate, 0.37 and 3.4); Newton on the depth alone 0.049 and 0.38; on the depth and its
     # rate, 0.010 and 0.070.
@@ -70,7 +70,7 @@ def test_a_term_added_is_the_force_the_cantilever_balance_gives_with_it(
         samples = Samples.from_curves(prepared.curves)
         free = (samples.depth <= 0).numpy()
         assert np.all(np.concatenate([solved[c] for c in samples.curve_ids])[free] == 0.0)
-    monkeypatch.setattr(inject, "BALANCE_STEPS", 0)  # the first order alone
+    monkeypatch.setattr(inject, "BALANCE_STEPS", 0)  # one linear step: the first order, with the depth's rate
     first = added_force(prepared, term, params, base)
     assert error(solved) < 0.05 * error(first)
 
