@@ -244,10 +244,11 @@ def added_force(
             mismatch, step = balance.newton(added)
         except (ValueError, RuntimeError):  # a depth off the model's reach (the fluid layer's grid)
             mismatch = step = torch.full_like(added, math.nan)
-        if not mismatch.abs().max().item() < worst:  # no nearer the balance (or off it): the step before is kept
+        size = mismatch.abs().max().item()
+        if not size < worst:  # no nearer the balance (or off it): the step before is kept
             added = added if kept is None else kept
             break
-        kept, worst = added, mismatch.abs().max().item()
+        kept, worst = added, size
         added = added + step
         if step.abs().max().item() <= 1e-3 * prepared.noise.std:
             break

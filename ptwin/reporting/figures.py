@@ -180,15 +180,16 @@ def _drawn(output_dir: Path, builders: dict, progress) -> dict[str, Path]:
     pickled in the children and unpickled in the run's own process (0.08 s there) for figures it only names."""
     figures = {}
     for name, build in builders.items():
+        path = figure_file(output_dir, name)
         try:
             figure = build()
-            figure.savefig(figure_file(output_dir, name), dpi=110)
+            figure.savefig(path, dpi=110)
         except ValueError as error:  # e.g. no positive finite value to put on a log axis
             progress(f"figure {name} not drawn: {str(error).splitlines()[0]}")
             plt.close("all")
             continue
         plt.close(figure)
-        figures[name] = figure_file(output_dir, name)
+        figures[name] = path
     return figures
 
 
