@@ -17,7 +17,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from ptwin.app import exit_now, one_line_errors, start, typed
+from ptwin.app import exit_now, one_line_errors, run_face, start, typed
 from ptwin.pipeline.run import run
 
 start()
@@ -31,5 +31,5 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_face(main)
     exit_now()

@@ -13,14 +13,16 @@ import os
 import select
 import sys
 import traceback
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NoReturn
 
 from hydra.core.config_store import ConfigStore
+from hydra.errors import HydraException, MissingConfigException, OverrideParseException
 from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
 from ptwin.data.recordings import RecordingError
 from ptwin.files import StoredFileError
@@ -63,6 +65,57 @@ def start(heap: bool = True) -> None:
     gc.freeze()
     if heap:
         keep_heap()
+
+
+OVERRIDE_GRAMMAR = "https://hydra.cc/docs/advanced/override_grammar/basic/"
+
+
+def run_face(main: Callable[[], None]) -> None:
+    """Run a face's ``@hydra.main`` function: a command line Hydra cannot compose into the face's config (a value
+    of the wrong type, a key the schema lacks, an option a config group lacks, an override it cannot parse) ends
+    with one line naming it and the fix, and exit code 2, as a setting that composes but cannot run does
+    (``SettingsError``), and so does a run folder Hydra cannot make (``hydra.run.dir``); Hydra itself answers
+    in four to twelve lines (a traceback for the folder) and exit code 1. Hydra hands those errors on
+    instead of printing them where ``HYDRA_FULL_ERROR`` is set, as it is here while ``main`` runs; a user who set
+    it gets Hydra's own answer, the stack trace they asked for."""
+    if "HYDRA_FULL_ERROR" in os.environ:
+        main()
+        return
+    os.environ["HYDRA_FULL_ERROR"] = "1"
+    try:
+        main()
+    except (HydraException, OmegaConfBaseException) as error:
+        print(_one_line(error), file=sys.stderr)
+        raise SystemExit(2) from None
+    except OSError as error:  # the run's own errors end in it (``one_line_errors``): this is Hydra making its folder
+        where = "hydra.sweep.dir" if "--multirun" in sys.argv or "-m" in sys.argv else "hydra.run.dir"
+        print(
+            f"{error.filename}: {error.strerror}; give {where} a folder that can be made and written", file=sys.stderr
+        )
+        raise SystemExit(2) from None
+    finally:
+        del os.environ["HYDRA_FULL_ERROR"]
+
+
+def _one_line(error: Exception) -> str:
+    """What Hydra and OmegaConf say of a command line they cannot compose, on one line, with the fix."""
+    said = str(error).splitlines()[0].rstrip(".") if str(error) else type(error).__name__
+    if isinstance(error, OverrideParseException):
+        return f"{error.override}: {said}; write it as Hydra's override grammar says ({OVERRIDE_GRAMMAR})"
+    if isinstance(error, MissingConfigException) and error.options:
+        group = (error.missing_cfg_file or "").rpartition("/")[0]
+        return f"{said}; {group or 'its group'} is one of {', '.join(error.options)}"
+    cause = error.__cause__
+    if isinstance(cause, OmegaConfBaseException) and str(cause):
+        said = f"{said}: {str(cause).splitlines()[0].rstrip('.')}"
+    # not Hydra's advice on a key the schema lacks ("To append to your config use +KEY=…"): a typo then runs unread
+    return f"{said}; `{_command()} --cfg job` prints every setting with its value"
+
+
+def _command() -> str:
+    """How this face was started: ``python train.py``, ``python -m ptwin.map``."""
+    spec = getattr(sys.modules["__main__"], "__spec__", None)
+    return f"python -m {spec.name}" if spec is not None else f"python {sys.argv[0]}"
 
 
 def exit_now() -> NoReturn:

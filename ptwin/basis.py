@@ -13,7 +13,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from ptwin.app import exit_now, one_line_errors, start, typed
+from ptwin.app import exit_now, one_line_errors, run_face, start, typed
 from ptwin.pgd.build import build_basis
 from ptwin.pgd.cache import cache_path
 from ptwin.physics.fluid_accuracy import verify
@@ -40,5 +40,5 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_face(main)
     exit_now()

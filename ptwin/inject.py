@@ -18,7 +18,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from ptwin.app import one_line_errors, start, typed
+from ptwin.app import one_line_errors, run_face, start, typed
 from ptwin.pipeline.inject import detection, detection_limits
 from ptwin.pipeline.settings import EVERY_TERM
 
@@ -34,4 +34,4 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_face(main)

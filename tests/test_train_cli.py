@@ -5,9 +5,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import hydra
 import pytest
+from hydra.errors import ConfigCompositionException
 
-from ptwin.app import SettingsError
+from ptwin.app import SettingsError, register, run_face
 from tests.conftest import settings_for
 
 ROOT = Path(__file__).parent.parent
@@ -80,16 +82,60 @@ def test_a_broken_pipe_elsewhere_is_reported_as_unexpected(tmp_path, monkeypatch
     assert "BrokenPipeError: a worker's socket" in (tmp_path / "error.log").read_text()
 
 
-def test_a_typo_in_a_config_key_fails_at_the_command_line(tmp_path):
+def test_a_typo_in_a_config_key_fails_at_the_command_line_in_one_line(tmp_path):
     result = run_train(tmp_path, "pgd.plane.ringz=3")
-    assert result.returncode != 0
-    assert "ringz" in result.stderr
+    assert result.returncode == 2
+    assert result.stderr.splitlines() == [
+        "Could not override 'pgd.plane.ringz': Key 'ringz' not in 'PlaneMesh'; "
+        "`python train.py --cfg job` prints every setting with its value"
+    ]
 
 
 def test_top_level_keys_are_typed_too(tmp_path):
     result = run_train(tmp_path, "seed=abc")
-    assert result.returncode != 0
-    assert "seed" in result.stderr and "abc" in result.stderr
+    assert result.returncode == 2
+    assert result.stderr.splitlines() == [
+        "Error merging override seed=abc: Value 'abc' of type 'str' could not be converted to Integer; "
+        "`python train.py --cfg job` prints every setting with its value"
+    ]
+
+
+@pytest.mark.parametrize(
+    ("arguments", "line"),
+    [
+        (["seed=["], "seed=[: no viable alternative at input '['; write it as Hydra's override grammar says"),
+        (["pgd=fine"], "In 'train': Could not find 'pgd/fine'; pgd is one of coarse, default, paper, precise"),
+        (["hydra.run.dir=/proc/run"], "/proc/run: No such file or directory; give hydra.run.dir a folder that can"),
+        (["-m", "hydra.sweep.dir=/proc/runs"], "/proc/runs: No such file or directory; give hydra.sweep.dir a folder"),
+    ],
+)
+def test_a_command_line_hydra_cannot_compose_or_place_ends_with_one_line(arguments, line, monkeypatch, capsys):
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    monkeypatch.setattr(sys, "argv", ["train.py", *arguments])
+    with pytest.raises(SystemExit) as ended:
+        run_face(_train_face())
+    assert ended.value.code == 2
+    said = capsys.readouterr().err.splitlines()
+    assert len(said) == 1 and said[0].startswith(line)
+    assert "HYDRA_FULL_ERROR" not in os.environ
+
+
+def test_a_user_who_asked_hydra_for_full_errors_gets_them(monkeypatch):
+    monkeypatch.setenv("HYDRA_FULL_ERROR", "1")
+    monkeypatch.setattr(sys, "argv", ["train.py", "seed=abc"])
+    with pytest.raises(ConfigCompositionException):
+        run_face(_train_face())
+
+
+def _train_face():
+    """train.py's face, composing its config and running nothing."""
+    register()
+
+    @hydra.main(version_base="1.3", config_path=str(ROOT / "configs"), config_name="train")
+    def main(cfg) -> None:
+        pytest.fail(f"composed {cfg}")
+
+    return main
 
 
 def test_a_setting_that_composes_but_cannot_run_ends_with_one_line(tmp_path):
