@@ -1,7 +1,7 @@
 """What the Hydra faces share (``train.py``, ``python -m ptwin.map``, ``python -m ptwin.inject``,
 ``python -m ptwin.basis``): the typed settings registered as the configs' schema, their conversion to
-dataclasses, and one line on stderr for anything that ends a run: exit code 2 for what a user can fix (bad
-recordings, a set that cannot support a diagnosis, a damaged or foreign checkpoint, an
+dataclasses, and one line on stderr for anything that ends a run: exit code 2 for what a user can fix (a command
+line Hydra cannot compose, bad recordings, a set that cannot support a diagnosis, a damaged or foreign checkpoint, an
 impossible setting, a Dask scheduler that does not answer), 3 for anything else, its
 traceback kept in the run directory."""
 

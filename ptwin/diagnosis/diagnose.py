@@ -482,8 +482,8 @@ def _chosen_at_values_the_field_has(
     so on. Beside a misfit such a term takes the shape of the model's error (a relaxation of g 22 on replicates of
     differing stiffness), and explains nothing; what the others explain stands on its own evidence. Dropping the
     whole subset said "unexplained" of a real creep of brain tissue (afmformats' ``fmt-jpk-cc_pr14-brain``) where
-    a power law (alpha 0.08) alone took the misfit from 77× the noise std to 3.6×, because the pair it fitted best
-    in paired it with a pore relaxation of M 3.44 Pa."""
+    a power law (alpha 0.08) alone takes the validation misfit from 77× the noise std to 4.0×: the subset of least
+    BIC held it beside a pore relaxation of M 3.44 Pa."""
     chosen, notes = choose(candidates, bic_margin, held_out)
     while chosen and candidates[chosen].leaves_structure(test):
         fit = candidates[chosen].fit
