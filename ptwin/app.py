@@ -7,6 +7,7 @@ traceback kept in the run directory."""
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import logging
 import os
@@ -133,11 +134,31 @@ def exit_now() -> NoReturn:
 
 def typed(cfg: DictConfig):
     """The composed config as its schema's dataclass (``Settings``, ``MapRunSettings``, ``InjectRunSettings`` or
-    ``BuildSettings``)."""
+    ``BuildSettings``). A key the schema lacks is refused: Hydra's ``+KEY=…`` adds one to a typed config, and the
+    dataclass leaves it out, so a misspelt ``+optim.hybrid.lambdas=…`` ran with nothing reading it."""
+    unread = _not_in_schema(cfg)
+    if unread:
+        raise SettingsError(
+            f"{', '.join(unread)}: no such setting, so nothing would read it (added by +{unread[0]}=…); "
+            f"`{_command()} --cfg job` prints every setting with its value"
+        )
     try:
         return OmegaConf.to_object(cfg)
     except ValueError as error:
         raise SettingsError(str(error).splitlines()[0]) from None
+
+
+def _not_in_schema(cfg: DictConfig, at: str = "") -> list[str]:
+    """The keys of ``cfg`` (dotted, under ``at``) that no field of their node's dataclass holds."""
+    schema = OmegaConf.get_type(cfg)
+    fields = {f.name for f in dataclasses.fields(schema)} if dataclasses.is_dataclass(schema) else None
+    found = []
+    for key, value in cfg.items_ex(resolve=False):
+        if fields is not None and key not in fields:
+            found.append(f"{at}{key}")
+        elif isinstance(value, DictConfig):
+            found += _not_in_schema(value, f"{at}{key}.")
+    return found
 
 
 @contextmanager

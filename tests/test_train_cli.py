@@ -100,6 +100,16 @@ def test_top_level_keys_are_typed_too(tmp_path):
     ]
 
 
+@pytest.mark.parametrize("added", ["+foo=1", "+optim.hybrid.lambdas=[1]", "+data.paht=x"])
+def test_a_key_added_that_no_setting_reads_is_refused_in_one_line(added):
+    # Hydra's +KEY=… adds a key to a typed config and the dataclass leaves it out: the run went on without it
+    key = added[1:].partition("=")[0]
+    with pytest.raises(SettingsError) as refused:
+        settings_for(added, "data.path=-", "cache_dir=-")
+    assert str(refused.value).startswith(f"{key}: no such setting, so nothing would read it (added by +{key}=…); ")
+    assert "\n" not in str(refused.value)
+
+
 @pytest.mark.parametrize(
     ("arguments", "line"),
     [
