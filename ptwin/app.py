@@ -25,6 +25,7 @@ from hydra.errors import HydraException, MissingConfigException, OverrideParseEx
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from ptwin.checks import first_line
 from ptwin.data.recordings import RecordingError
 from ptwin.files import StoredFileError
 from ptwin.heap import keep_heap
@@ -100,7 +101,7 @@ def run_face(main: Callable[[], None]) -> None:
 
 def _one_line(error: Exception) -> str:
     """What Hydra and OmegaConf say of a command line they cannot compose, on one line, with the fix."""
-    said = str(error).splitlines()[0].rstrip(".") if str(error) else type(error).__name__
+    said = first_line(error).rstrip(".")
     if isinstance(error, OverrideParseException):
         return f"{error.override}: {said}; write it as Hydra's override grammar says ({OVERRIDE_GRAMMAR})"
     if isinstance(error, MissingConfigException) and error.options:
@@ -108,7 +109,7 @@ def _one_line(error: Exception) -> str:
         return f"{said}; {group or 'its group'} is one of {', '.join(error.options)}"
     cause = error.__cause__
     if isinstance(cause, OmegaConfBaseException) and str(cause):
-        said = f"{said}: {str(cause).splitlines()[0].rstrip('.')}"
+        said = f"{said}: {first_line(cause).rstrip('.')}"
     # not Hydra's advice on a key the schema lacks ("To append to your config use +KEY=…"): a typo then runs unread
     return f"{said}; `{_command()} --cfg job` prints every setting with its value"
 
@@ -145,7 +146,7 @@ def typed(cfg: DictConfig):
     try:
         return OmegaConf.to_object(cfg)
     except ValueError as error:
-        raise SettingsError(str(error).splitlines()[0]) from None
+        raise SettingsError(first_line(error)) from None
 
 
 def _not_in_schema(cfg: DictConfig, at: str = "") -> list[str]:
@@ -184,7 +185,7 @@ def one_line_errors(output_dir: Path) -> Iterator[None]:
         log = output_dir / "error.log"
         log.parent.mkdir(parents=True, exist_ok=True)
         log.write_text(traceback.format_exc())
-        first = str(error).splitlines()[0] if str(error) else ""
+        first = first_line(error, silent="")
         print(
             f"ptwin: unexpected {type(error).__name__} ({first}); the traceback is in {log}: please report it",
             file=sys.stderr,

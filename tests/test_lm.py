@@ -262,6 +262,19 @@ def test_a_start_the_model_cannot_evaluate_is_a_fit_error_in_words():
         solver.step()
 
 
+def test_a_model_that_fails_without_a_message_is_a_fit_error_naming_its_error():
+    import pytest
+
+    from ptwin.fitting.lm import FitError
+
+    def residual(theta):
+        raise RuntimeError()  # the error's first line was taken by index: IndexError, no FitError
+
+    solver = LevenbergMarquardt(residual, torch.tensor([1.0], dtype=torch.float64))
+    with pytest.raises(FitError, match=r"^the model cannot be evaluated \(RuntimeError\)$"):
+        solver.step()
+
+
 def test_a_system_too_singular_to_solve_is_retried_with_more_damping(monkeypatch):
     # The first normal equations "fail" to solve: no step. The run goes on with a larger damping rather than
     # reading the empty step as one that promised nothing.

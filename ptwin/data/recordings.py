@@ -15,6 +15,8 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from ptwin.checks import first_line
+
 FORMAT = "ptwin-recordings/1"
 COLUMNS = ("curve", "base_speed", "time", "z", "force")
 SEGMENTS = ("approach", "hold", "creep", "retract")  # the optional column's values, in the order a curve has them
@@ -112,7 +114,7 @@ def _read_meta(file: Path) -> Meta:
     try:
         values = yaml.safe_load(file.read_text())
     except yaml.YAMLError as error:
-        raise RecordingError(f"{file}: not valid YAML ({str(error).splitlines()[0]}); fix the syntax") from None
+        raise RecordingError(f"{file}: not valid YAML ({first_line(error)}); fix the syntax") from None
     if not isinstance(values, dict):
         raise RecordingError(f"{file}: expected key: value lines (probe_radius, spring_constant, ...)")
     if values.get("format", FORMAT) != FORMAT:
@@ -176,7 +178,7 @@ def _read_curves(file: Path, meta: Meta) -> pd.DataFrame:
         frame = pd.read_csv(file, dtype=str, keep_default_na=False)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
         raise RecordingError(
-            f"{file}: not a readable CSV ({str(error).splitlines()[0]}); one header line, comma separated"
+            f"{file}: not a readable CSV ({first_line(error)}); one header line, comma separated"
         ) from None
     missing = [c for c in COLUMNS if c not in frame.columns]
     if missing:

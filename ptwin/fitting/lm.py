@@ -26,6 +26,8 @@ import torch
 from torch import nn
 from torch.func import functional_call
 
+from ptwin.checks import first_line
+
 
 class Traced:
     """f evaluated at x with its graph kept: the value now, the Jacobian there later without evaluating f again
@@ -175,7 +177,7 @@ class LevenbergMarquardt:
         try:
             jacobian, r = self.linearise(theta) if traced is None else traced.jacobian_and_value()
         except (ValueError, RuntimeError) as error:  # e.g. the fluid layer refusing a point off its grid
-            raise FitError(f"the model cannot be evaluated ({str(error).splitlines()[0]})") from None
+            raise FitError(f"the model cannot be evaluated ({first_line(error)})") from None
         if not (torch.isfinite(jacobian).all() and torch.isfinite(r).all()):
             raise FitError("the model or its derivatives are not finite at these parameters")
         return jacobian, r

@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from functools import partial
 
+from ptwin.checks import first_line
 from ptwin.heap import keep_heap
 from ptwin.threads import one_thread
 
@@ -82,7 +83,7 @@ def _on_dask(function: Callable, items: Sequence, scheduler: str, workers: int, 
                 cluster, client = None, Client(scheduler, timeout=CONNECT_SECONDS)
             except (OSError, ValueError, TypeError) as error:
                 raise EngineError(
-                    f"map.scheduler={scheduler}: no Dask scheduler answers there ({str(error).splitlines()[0]}); "
+                    f"map.scheduler={scheduler}: no Dask scheduler answers there ({first_line(error)}); "
                     f"start one (dask scheduler, dask-jobqueue) and give its address, or use map.scheduler=local"
                 ) from None
         try:

@@ -14,6 +14,7 @@ from pathlib import Path
 import pandas as pd
 from tqdm import tqdm
 
+from ptwin.checks import first_line
 from ptwin.data.recordings import RecordingError
 from ptwin.diagnosis.spatial import summarise_map
 from ptwin.pipeline.engine import run_each
@@ -86,9 +87,8 @@ def _spot_task(spot: Spot, settings: Settings, hybrid: bool, results_dir: Path) 
 
 def _lost(spot: Spot, error: Exception) -> dict:
     """The result of a spot whose task never came back (its worker died): a row that says so."""
-    first = str(error).splitlines()[0] if str(error) else type(error).__name__
     row = blank_row(spot)
-    row["status"] = f"its task was lost ({first}); rerun the map to retry it"
+    row["status"] = f"its task was lost ({first_line(error)}); rerun the map to retry it"
     return {"row": row, "diagnosis": None, "lost": True}
 
 

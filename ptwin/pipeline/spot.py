@@ -14,6 +14,7 @@ from pathlib import Path
 import torch
 import yaml
 
+from ptwin.checks import first_line
 from ptwin.data.recordings import RecordingError
 from ptwin.diagnosis.diagnose import Diagnosis
 from ptwin.diagnosis.words import finite_or_none
@@ -89,9 +90,9 @@ def diagnose_spot(spot: Spot, settings: Settings, hybrid: bool, output_dir: Path
     try:
         diagnosis = _diagnosis(replace(settings, data=replace(settings.data, path=str(spot.path))), hybrid, output_dir)
     except (RecordingError, StoredFileError, FitError) as error:
-        row["status"] = str(error).splitlines()[0]
+        row["status"] = first_line(error)
     except Exception as error:  # a spot never stops the map: the line names it, the traceback comes back with it
-        first = str(error).splitlines()[0] if str(error) else ""
+        first = first_line(error, silent="")
         row["status"] = f"unexpected {type(error).__name__} ({first}); see {result_path(spot)}: please report it"
         result["traceback"] = traceback.format_exc()
     else:

@@ -13,6 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from ptwin.checks import first_line
 from ptwin.data.recordings import CREEP, HOLD  # noqa: E402
 from ptwin.fitting.split import Split  # noqa: E402
 from ptwin.physics.terms import VOCABULARY  # noqa: E402
@@ -185,7 +186,7 @@ def _drawn(output_dir: Path, builders: dict, progress) -> dict[str, Path]:
             figure = build()
             figure.savefig(path, dpi=110)
         except ValueError as error:  # e.g. no positive finite value to put on a log axis
-            progress(f"figure {name} not drawn: {str(error).splitlines()[0]}")
+            progress(f"figure {name} not drawn: {first_line(error)}")
             plt.close("all")
             continue
         plt.close(figure)
