@@ -6,11 +6,13 @@ import sys
 from pathlib import Path
 
 import hydra
+import pandas as pd
 import pytest
 from hydra.errors import ConfigCompositionException
 
 from ptwin.app import SettingsError, register, run_face
-from tests.conftest import settings_for
+from ptwin.pipeline.prepare import UnsupportedSet, prepare
+from tests.conftest import settings_for, simulated_set
 
 ROOT = Path(__file__).parent.parent
 
@@ -38,6 +40,21 @@ def test_bad_recording_set_ends_with_one_located_line(tmp_path):
     last = (result.stdout + result.stderr).strip().splitlines()[-1]
     assert last == f"{folder / 'meta.yaml'}: probe_radius 12 m is not SI (micrometres?); write e.g. 12.0e-6"
     assert "Traceback" not in result.stderr
+
+
+def test_a_reference_curve_that_barely_indents_is_refused_in_one_line(tmp_path):
+    # Its approach in contact is the elastic law: with no sample there, building the law raised IndexError (exit 3)
+    folder = simulated_set(tmp_path / "set", z_start=-1.0e-6)
+    curves = pd.read_csv(folder / "curves.csv")
+    reference = curves["curve"] == "v0.5"
+    pressed = reference & (curves["z"] >= 0)
+    kept = ~pressed | (pressed.cumsum() <= 19)  # 19 of the reference's samples past contact, its depth > 0 at most
+    curves[kept].to_csv(folder / "curves.csv", index=False)
+    with pytest.raises(UnsupportedSet) as refused:
+        prepare(settings_for(f"data.path={folder}", "cache_dir=-"), progress=lambda _: None)
+    line = str(refused.value)
+    assert line.startswith(f"{folder / 'curves.csv'}: curve 'v0.5', the reference curve, has ")
+    assert "approach samples in contact (20 at least)" in line and "\n" not in line
 
 
 def test_a_run_whose_output_is_closed_says_so_in_one_line(tmp_path, coarse_cache):

@@ -14,7 +14,7 @@ import torch
 from ptwin.data.evidence import SPOT_VARIATION, RateEffect, drag_from_baselines, rate_effect, spot_variation
 from ptwin.data.kinematics import CurveKinematics, curve_kinematics
 from ptwin.data.noise import NOTHING, NoiseModel, corrected, pooled
-from ptwin.data.recordings import APPROACH, Meta, RecordingError, RecordingSet, load_recordings
+from ptwin.data.recordings import APPROACH, MIN_SAMPLES, Meta, RecordingError, RecordingSet, load_recordings
 from ptwin.data.relaxation import Relaxation, relaxations
 from ptwin.fitting.hybrid import ErrorNetwork, HybridTwin
 from ptwin.fitting.split import Split, split_samples
@@ -142,6 +142,7 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     curves = [replace(c, noise=corrected(c.noise, noise)) for c in curves]
     _print_kinematics(curves, progress)
     reference = next(c for c in curves if c.curve == meta.reference_curve)
+    _check_law(recordings, reference)
     law = ReferenceCurve(reference, settings.model.elastic_nodes, settings.model.elastic_smoothing)
     fitted, notes = _fitted_curves(recordings, curves, reference, law)
     notes += [_unsettled_note(c) for c in curves if c.noise.unsettled]
@@ -196,6 +197,18 @@ def _check_noise(recordings: RecordingSet, curves: list[CurveKinematics]) -> Non
             f"{recordings.path}: {why}: no noise to judge a fit by (a force simulated without noise, a detector "
             "stuck, smoothed or exported to few digits); export the raw force, leave such a curve out, or set "
             "noise_std in meta.yaml to the instrument's noise [N]"
+        )
+
+
+def _check_law(recordings: RecordingSet, reference: CurveKinematics) -> None:
+    """The reference curve's approach in contact is the elastic law: with fewer than ``MIN_SAMPLES`` samples there it
+    cannot be read (with none, building it raised IndexError)."""
+    count = int((reference.in_contact & (reference.segment == APPROACH)).sum())
+    if count < MIN_SAMPLES:
+        raise UnsupportedSet(
+            f"{recordings.path / 'curves.csv'}: curve {reference.curve!r}, the reference curve, has {count} approach "
+            f"samples in contact ({MIN_SAMPLES} at least): its approach is the elastic law; record it into the sample, "
+            "or name a curve that indents as reference_curve in meta.yaml"
         )
 
 
