@@ -7,6 +7,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from ptwin.data.recordings import Meta, RecordingError, load_recordings, write_recordings
+from ptwin.pipeline.prepare import prepare
+from tests.conftest import settings_for, simulated_set
 
 META = Meta(
     probe_radius=12e-6, spring_constant=2.88, sample_thickness=6e-3, fluid_viscosity=1e-3, reference_curve="v0.5"
@@ -88,12 +90,32 @@ def meta_text(**changes) -> str:
         (meta_text(reference_curve="v1"), r"meta.yaml: reference_curve 'v1' is not a curve"),
         (meta_text(sample_thickness=None), r"meta.yaml: missing key 'sample_thickness'"),
         (meta_text(fluid_viscosity="water"), r"meta.yaml: fluid_viscosity 'water' is not a number"),
+        # a noise std in nN read as newtons: nothing would be named, under a noise 1e9 times too large
+        (meta_text(noise_std="0.3"), r"meta.yaml: noise_std 0.3 N is not SI \(nanonewtons\?\); write newtons"),
+        # a misspelt optional key ran unread: the noise measured on the baselines, the contacts taken as known
+        (meta_text(noise_sd="2e-10"), r"meta.yaml: 'noise_sd' is no key .*; did you mean 'noise_std'\?$"),
+        (meta_text(contact_piont="estimate"), r"meta.yaml: 'contact_piont' is no key .*; did you mean 'contact_point'"),
     ],
 )
 def test_bad_meta_gets_one_located_line(tmp_path, meta_text, message):
     write_raw(tmp_path, good_curves(), meta_text)
-    with pytest.raises(RecordingError, match=message):
+    with pytest.raises(RecordingError, match=message) as error:
         load_recordings(tmp_path)
+    assert "\n" not in str(error.value)
+
+
+def test_a_labs_own_meta_keys_load_and_are_said_unread(tmp_path):
+    write_raw(tmp_path, good_curves(), meta_text(operator="J. Doe", tip_shape="cone"))
+    loaded = load_recordings(tmp_path)
+    assert loaded.meta == META
+    assert loaded.unread == ("operator", "tip_shape")
+
+
+def test_a_run_says_which_meta_keys_it_did_not_read(tmp_path, coarse_cache):
+    folder = simulated_set(tmp_path / "set")
+    (folder / "meta.yaml").write_text((folder / "meta.yaml").read_text() + "tip_shape: cone\n")
+    prepared = prepare(settings_for(f"data.path={folder}", "pgd=coarse", f"cache_dir={coarse_cache}"), lambda _: None)
+    assert "meta.yaml: tip_shape: no key of the recording format (v1.2), so not read." in prepared.notes
 
 
 def test_missing_files_are_named(tmp_path):

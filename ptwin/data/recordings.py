@@ -7,6 +7,7 @@ pre-contact samples, baseline offsets and unequal final depths are evidence, not
 
 from __future__ import annotations
 
+import difflib
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -44,6 +45,22 @@ SATURATED = 10
 _PLAUSIBLE = {"z": (1e-3, "m (micrometres?)"), "force": (1e-3, "N (nanonewtons?)"), "base_speed": (1e-2, "m/s (µm/s?)")}
 
 
+# The keys of meta.yaml in the recording format (v1.2): a key past them is read by nothing.
+KEYS = (
+    "format",
+    "sample",
+    "probe_radius",
+    "spring_constant",
+    "sample_thickness",
+    "fluid_viscosity",
+    "reference_curve",
+    "contact_point",
+    "noise_std",
+    "notes",
+    "position",
+)
+
+
 class RecordingError(ValueError):
     """Bad input in a recording set; the message is the one line to show the user."""
 
@@ -76,6 +93,7 @@ class RecordingSet:
     path: Path
     meta: Meta
     curves: pd.DataFrame
+    unread: tuple[str, ...] = ()  # keys of meta.yaml outside the format (a lab's own), which nothing reads
 
     @property
     def curve_ids(self) -> list[str]:
@@ -92,9 +110,9 @@ def load_recordings(path: str | Path) -> RecordingSet:
         raise RecordingError(
             f"{folder}: no such recording-set folder; give data.path=<folder with meta.yaml and curves.csv>"
         )
-    meta = _read_meta(folder / "meta.yaml")
+    meta, unread = _read_meta(folder / "meta.yaml")
     curves = _read_curves(folder / "curves.csv", meta)
-    return RecordingSet(folder, meta, curves)
+    return RecordingSet(folder, meta, curves, unread)
 
 
 def write_recordings(path: str | Path, meta: Meta, curves: pd.DataFrame) -> None:
@@ -108,7 +126,8 @@ def write_recordings(path: str | Path, meta: Meta, curves: pd.DataFrame) -> None
     curves.to_csv(folder / "curves.csv", index=False, float_format="%.17g")
 
 
-def _read_meta(file: Path) -> Meta:
+def _read_meta(file: Path) -> tuple[Meta, tuple[str, ...]]:
+    """The set's ``Meta``, and the keys outside the format (``KEYS``) it holds besides."""
     if not file.is_file():
         raise RecordingError(f"{file}: missing; a recording set needs meta.yaml beside curves.csv")
     try:
@@ -138,15 +157,33 @@ def _read_meta(file: Path) -> Meta:
     if contact not in ("known", "estimate"):
         raise RecordingError(f"{file}: contact_point {contact!r}; use known or estimate")
     noise = values.get("noise_std")
-    return Meta(
+    noise = None if noise is None else _positive_number(file, "noise_std", noise)
+    if noise is not None and noise > _PLAUSIBLE["force"][0]:
+        raise RecordingError(f"{file}: noise_std {noise:g} N is not SI (nanonewtons?); write newtons, e.g. 2.0e-10")
+    meta = Meta(
         **numbers,
         reference_curve=str(values["reference_curve"]),
         sample=str(values.get("sample", "")),
         contact_point=contact,
-        noise_std=None if noise is None else _positive_number(file, "noise_std", noise),
+        noise_std=noise,
         notes=str(values.get("notes", "")),
         position=_position(file, values.get("position")),
     )
+    return meta, _outside_format(file, values)
+
+
+def _outside_format(file: Path, values: dict) -> tuple[str, ...]:
+    """The keys of ``values`` outside the format: a lab's own are kept (and said unread), but one spelt like a key of
+    the format it lacks is refused, a misspelt optional key (``noise_sd``, ``contact_piont``) having run unread."""
+    outside = tuple(str(key) for key in values if key not in KEYS)
+    for key in outside:
+        meant = difflib.get_close_matches(key, [k for k in KEYS if k not in values], n=1, cutoff=0.8)
+        if meant:
+            raise RecordingError(
+                f"{file}: {key!r} is no key of the recording format, so nothing would read it; "
+                f"did you mean {meant[0]!r}?"
+            )
+    return outside
 
 
 def _position(file: Path, value) -> tuple[float, float] | None:

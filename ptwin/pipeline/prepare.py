@@ -146,6 +146,9 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
     law = ReferenceCurve(reference, settings.model.elastic_nodes, settings.model.elastic_smoothing)
     fitted, notes = _fitted_curves(recordings, curves, reference, law)
     notes += [_unsettled_note(c) for c in curves if c.noise.unsettled]
+    if recordings.unread:
+        keys = ", ".join(recordings.unread)
+        notes.append(f"meta.yaml: {keys}: no key of the recording format (v1.2), so not read.")
     gain = partial(law.noise_gain, spring_constant=meta.spring_constant)
     samples, noise = fitted_samples(fitted, noise, settings.device, reference, gain)
     basis = cached_basis(settings.pgd, settings.cache_dir, progress)
