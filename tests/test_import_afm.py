@@ -254,14 +254,16 @@ def test_replicates_are_named_as_the_contract_names_them_and_never_take_a_creeps
 
 
 class Relabelled:
-    """A real curve as afmformats gives it, under its file's metadata updated by ``extra``."""
+    """A real curve as afmformats gives it, under its file's metadata updated by ``extra``; given another "speed
+    approach", its time runs as that speed would take it over the same travel (the loader checks the two agree)."""
 
     def __init__(self, curve, extra: dict):
         self.curve, self.columns = curve, curve.columns
         self.metadata = {key: curve.metadata[key] for key in curve.metadata} | extra
+        self.pace = curve.metadata["speed approach"] / self.metadata["speed approach"]
 
     def __getitem__(self, column):
-        return self.curve[column]
+        return self.curve[column] * self.pace if column == "time" else self.curve[column]
 
 
 class PlacedCurve(Relabelled):

@@ -57,6 +57,10 @@ def write_raw(tmp_path, curves: pd.DataFrame, meta_text: str | None = None):
         (lambda c: c.iloc[:50], r"curve 'v8' has 10 samples, at least 20"),
         (lambda c: pd.concat([c.iloc[:10], c.iloc[40:], c.iloc[10:40]]), r"curve 'v0.5' resumes after another curve"),
         (lambda c: c.assign(force=c["force"] - 1e-4), r"depth .* exceeds the probe radius"),
+        (  # a speed in mm/s read as m/s is no larger than 1e-2: only z's own rate shows it
+            lambda c: c.assign(base_speed=c["base_speed"] * 1e3),
+            r"row 2, curve 'v0.5': base_speed 0.0005 m/s on the approach, but z advances at 5e-07 m/s over it",
+        ),
         (
             lambda c: c.assign(force=c["force"].where(c["curve"] != "v8", saturated(c))),
             r"rows 68–81, curve 'v8': .* detector saturated",

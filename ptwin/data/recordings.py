@@ -28,6 +28,8 @@ SPEED_SIGN = {
     "creep": lambda v: v == 0,
     "retract": lambda v: v < 0,
 }
+SPEED_AGREEMENT = 3.0  # the factor z's own rate over an approach may be off its base_speed (imports: 0.90–1.001; a JPK
+# piezo height without its sensor, 0.54–0.65)
 SPEED_RULE = {
     "approach": "> 0 (into the sample)",
     "hold": "0 (the base is fixed)",
@@ -358,3 +360,20 @@ def _check_segments(file: Path, rows: pd.DataFrame, start: int) -> None:
                 f"{file}: row {first + 2}, curve {curve!r}: base_speed {speeds[mine][0]:g} on the {name}; it must be "
                 f"{SPEED_RULE[name]}"
             )
+        if name == "approach":
+            _check_approach_speed(file, rows[mine], first, speeds[mine][0])
+
+
+def _check_approach_speed(file: Path, rows: pd.DataFrame, first: int, speed: float) -> None:
+    """z's own rate over the approach (end to end) against its nominal ``speed`` [m/s]: more than a factor
+    ``SPEED_AGREEMENT`` apart, one of the two is wrong (a speed in mm/s, z from another channel, a base that never
+    moved), and the speed labels the curve, its drag and the experiments proposed."""
+    time, z = rows["time"].to_numpy(), rows["z"].to_numpy()
+    if len(time) < 2:
+        return
+    moved = (z[-1] - z[0]) / (time[-1] - time[0])
+    if not 1 / SPEED_AGREEMENT <= moved / speed <= SPEED_AGREEMENT:
+        raise RecordingError(
+            f"{file}: row {first + 2}, curve {rows['curve'].iloc[0]!r}: base_speed {speed:g} m/s on the approach, "
+            f"but z advances at {moved:.3g} m/s over it; give the speed the base moves at, or fix z and time"
+        )
