@@ -28,7 +28,7 @@ SPEED_SIGN = {
     "creep": lambda v: v == 0,
     "retract": lambda v: v < 0,
 }
-SPEED_AGREEMENT = 3.0  # the factor z's own rate over an approach may be off its base_speed (imports: 0.90–1.001; a JPK
+SPEED_AGREEMENT = 3.0  # the factor z's own rate over an approach may be off its base_speed (imports: 0.90–1.002; a JPK
 # piezo height without its sensor, 0.54–0.65)
 SPEED_RULE = {
     "approach": "> 0 (into the sample)",
