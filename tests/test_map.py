@@ -228,6 +228,26 @@ def test_spots_left_without_fluid_force_are_counted_apart_from_k_s_spread():
     )
 
 
+@pytest.mark.parametrize(
+    ("x", "said"),
+    [
+        ([0.0, 1e-6, 0.0, np.nan], "1 of 4 spots have no position in their meta.yaml (d): the maps lay every spot out"),
+        ([0.0, 1e-6, 0.0, 0.0], "1 position(s) hold more than one spot (c and d): each map shows one spot of each."),
+    ],
+)
+def test_what_the_positions_keep_the_maps_from_showing_is_said(x, said):
+    # A spot without a position (the report said "the spots have no positions") or two at one place (one hidden
+    # behind the other on every map) went unsaid.
+    from ptwin.diagnosis.spatial import summarise_map
+
+    table = pd.DataFrame({"spot": list("abcd"), "x": x, "y": [0.0, 0.0, 1e-6, 1e-6], "status": "ok"})
+    table["permeability"], table["effective_modulus"] = 2e-16, 1e4
+    table["left_out"], table["confidence"], table["unexplained"] = "solid_viscosity", "strong", False
+    sentences = summarise_map(table)["sentences"]
+    assert said in " ".join(sentences)
+    assert sum("position" in sentence for sentence in sentences) == 1 + (np.isnan(x[-1]))
+
+
 def test_spots_refused_for_one_reason_share_one_line_of_the_report(tmp_path):
     # A map recorded at one speed gave one identical line per spot (4096 on a 64×64 map), each behind its path.
     from ptwin.diagnosis.spatial import summarise_map

@@ -95,6 +95,7 @@ def summarise_map(table: pd.DataFrame) -> dict:
             "they give no K (spots.csv gives the lower bound the data set, where they set one), and K's median and "
             "spread are over the other spots."
         )
+    summary["sentences"] += _places(table)
     place = grid(table)
     terms = sorted({t for names in ok["left_out"] for t in names.split(";") if t})  # named at any confidence
     for term in terms:
@@ -104,7 +105,7 @@ def summarise_map(table: pd.DataFrame) -> dict:
         if place is None:
             entry["sentence"] = (
                 f"{term} is named with moderate or strong confidence at {entry['spots']} of {len(ok)} diagnosed "
-                f"spots (weak at {entry['weak_spots']} more); the spots have no positions, so whether they form a "
+                f"spots (weak at {entry['weak_spots']} more); without every spot's position, whether they form a "
                 "region is not known."
             )
         else:
@@ -116,6 +117,35 @@ def summarise_map(table: pd.DataFrame) -> dict:
         summary["terms"][term] = entry
         summary["sentences"].append(entry["sentence"])
     return finite_or_none(summary)
+
+
+def _places(table: pd.DataFrame) -> list[str]:
+    """What the spots' positions leave the maps unable to show: some spots without one (the maps then lay every spot
+    out in reading order), spots that share one (a map's cell shows one of them); in sentences."""
+    said = []
+    missing = table["spot"][table[["x", "y"]].isna().any(axis=1)].tolist()
+    if 0 < len(missing) < len(table):
+        said.append(
+            f"{len(missing)} of {len(table)} spots have no position in their meta.yaml ({listed(missing)}): the maps "
+            "lay every spot out in reading order."
+        )
+    if not missing:
+        at: dict[tuple[float, float], list[str]] = {}
+        for spot, x, y in zip(table["spot"], table["x"], table["y"]):
+            at.setdefault((round(x * 1e9), round(y * 1e9)), []).append(spot)  # to the nanometre, as ``grid``
+        shared = [spots for spots in at.values() if len(spots) > 1]
+        if shared:
+            said.append(
+                f"{len(shared)} position(s) hold more than one spot ({listed([' and '.join(g) for g in shared])}): "
+                "each map shows one spot of each."
+            )
+    return said
+
+
+def listed(names: list[str], most: int = 3) -> str:
+    """The first ``most`` of ``names``, and how many more."""
+    more = f", and {len(names) - most} more" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
 
 
 def _spread(values: pd.Series) -> dict:

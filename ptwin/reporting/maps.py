@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from ptwin.diagnosis.spatial import FAILED, failure_reasons, grid, verdict  # noqa: E402
+from ptwin.diagnosis.spatial import FAILED, failure_reasons, grid, listed, verdict  # noqa: E402
 from ptwin.reporting.figures import tight  # noqa: E402
 
 MICRO = 1e6
@@ -130,5 +130,4 @@ def _report(table: pd.DataFrame, summary: dict, figures: list[str]) -> str:
 
 def _listed(spots: list[str]) -> str:
     """The spots, the first ``LISTED`` by name, with their count."""
-    more = f", and {len(spots) - LISTED} more" if len(spots) > LISTED else ""
-    return f"{', '.join(spots[:LISTED])}{more} ({len(spots)})"
+    return f"{listed(spots, LISTED)} ({len(spots)})"
