@@ -1,6 +1,7 @@
 """What a hold shows before any model (``ptwin.data.relaxation``), against a known relaxation."""
 
 import math
+from dataclasses import replace
 
 import pytest
 
@@ -60,3 +61,15 @@ def test_a_held_force_that_ends_below_the_baseline_is_not_read_as_a_relaxed_frac
     assert "ends below the baseline" in wrong.sentence() and "not a measurement" in wrong.sentence()
     right = Relaxation("v20h", "hold", 30.0, 324e-9, 116e-9, 1e-9, 1.6)
     assert right.sentence().startswith("v20h: the force relaxes by 64.2% over the 30 s hold")
+
+
+def test_a_creep_says_its_force_as_recorded_rather_than_held(tmp_path):
+    # A creep's sentence said "at constant force" whatever the force did: a hold marked creep, relaxing 12%, read so.
+    creep = Hold(2e-6, 0.5, 8e-6, creep=True)
+    experiment = Experiment(base_speeds=(), holds=(creep,), z_start=-0.5e-6, sample_rate=2000.0, noise_std=1e-10)
+    write_recordings(tmp_path, *simulate(replace(experiment, effects={"solid_relaxation": {"g": 0.2, "tau": 0.1}})))
+    (crept,) = relaxations(curve_kinematics(load_recordings(tmp_path)))
+    first, last = crept.force
+    assert crept.kind == "creep" and last == pytest.approx(first, rel=0.01)  # the simulated feedback holds it
+    assert f"creep (its force {first * 1e9:.4g} → {last * 1e9:.4g} nN, " in crept.sentence()
+    assert "constant force" not in crept.sentence()

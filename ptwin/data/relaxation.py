@@ -12,7 +12,7 @@ are said only where the change exceeds ``SEEN`` standard errors.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -35,6 +35,9 @@ class Relaxation:
     end: float  # its mean over the segment's last TAIL
     error: float  # standard error of end − start, same unit
     half_time: float | None  # [s] from the segment's first sample to half the change (None: the change is noise)
+    # A creep's force [N] where the approach ended and over its last TAIL: the feedback's to hold, which the
+    # sentence shows rather than claims (a hold marked creep relaxed 20% "at constant force"); None for a hold.
+    force: tuple[float, float] | None = None
 
     @property
     def change(self) -> float:
@@ -54,8 +57,11 @@ class Relaxation:
         else:
             what = (
                 f"the tip sinks by {(self.end - self.start) * 1e6:.3g} µm ({100 * self.change:.1f}% of its depth) over "
-                f"the {self.duration:.3g} s creep at constant force"
+                f"the {self.duration:.3g} s creep"
             )
+            if self.force is not None:
+                first, last = self.force
+                what += f" (its force {first * 1e9:.4g} → {last * 1e9:.4g} nN, {100 * (last - first) / first:+.1f}%)"
         if self.kind == "hold" and self.end < -SEEN * self.error:
             # An indenting tip pushes: a held force that ends below the baseline says the baseline removed from
             # the curve (a level and a tilt read off its approach, extended into contact) does not hold there.
@@ -81,9 +87,13 @@ def relaxations(curves: list[CurveKinematics]) -> list[Relaxation]:
                 continue
             values = curve.force if kind == "hold" else curve.depth
             before = mine[0] - 1
-            start = values[before] if before >= 0 and curve.segment[before] == APPROACH else values[mine[0]]
+            origin = before if before >= 0 and curve.segment[before] == APPROACH else mine[0]
             time = curve.time[mine] - curve.time[mine[0]]
-            found.append(_read(curve.curve, kind, time, float(start), values[mine]))
+            read = _read(curve.curve, kind, time, float(values[origin]), values[mine])
+            if kind == "creep":
+                tail = max(int(TAIL * mine.size), 1)
+                read = replace(read, force=(float(curve.force[origin]), float(curve.force[mine[-tail:]].mean())))
+            found.append(read)
     return found
 
 
