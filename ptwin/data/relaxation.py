@@ -36,7 +36,7 @@ class Relaxation:
     error: float  # standard error of end − start, same unit
     half_time: float | None  # [s] from the segment's first sample to half the change (None: the change is noise)
     # A creep's force [N] where the approach ended and over its last TAIL: the feedback's to hold, which the
-    # sentence shows rather than claims (a hold marked creep relaxed 20% "at constant force"); None for a hold.
+    # sentence shows rather than claims (a hold marked creep relaxed 12% "at constant force"); None for a hold.
     force: tuple[float, float] | None = None
 
     @property
