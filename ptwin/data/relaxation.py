@@ -91,8 +91,9 @@ def relaxations(curves: list[CurveKinematics]) -> list[Relaxation]:
             time = curve.time[mine] - curve.time[mine[0]]
             read = _read(curve.curve, kind, time, float(values[origin]), values[mine])
             if kind == "creep":
-                tail = max(int(TAIL * mine.size), 1)
-                read = replace(read, force=(float(curve.force[origin]), float(curve.force[mine[-tail:]].mean())))
+                read = replace(
+                    read, force=(float(curve.force[origin]), float(curve.force[mine[-_tail(mine.size) :]].mean()))
+                )
             found.append(read)
     return found
 
@@ -100,7 +101,7 @@ def relaxations(curves: list[CurveKinematics]) -> list[Relaxation]:
 def _read(curve: str, kind: str, time: np.ndarray, start: float, values: np.ndarray) -> Relaxation:
     # The segment's own scatter (second differences remove any smooth relaxation), in its own unit.
     noise = float(np.std(np.diff(values, 2)) / np.sqrt(6.0))
-    tail = max(int(TAIL * values.size), 1)
+    tail = _tail(values.size)
     end = float(values[-tail:].mean())
     error = noise * np.sqrt(1.0 + 1.0 / tail)
     smoothed = np.convolve(values, np.ones(SMOOTHING) / SMOOTHING, mode="valid")
@@ -108,3 +109,8 @@ def _read(curve: str, kind: str, time: np.ndarray, start: float, values: np.ndar
     half = time[int(np.argmax(halfway)) + SMOOTHING // 2] if halfway.any() else None
     relaxation = Relaxation(curve, kind, float(time[-1]), start, end, float(error), half)
     return relaxation if relaxation.seen else Relaxation(curve, kind, float(time[-1]), start, end, float(error), None)
+
+
+def _tail(size: int) -> int:
+    """How many of a segment's ``size`` samples its relaxed value is the mean of: its last ``TAIL``, one at least."""
+    return max(int(TAIL * size), 1)

@@ -13,7 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from ptwin.checks import first_line
+from ptwin.checks import first_line  # noqa: E402
 from ptwin.data.recordings import CREEP, HOLD  # noqa: E402
 from ptwin.fitting.split import Split  # noqa: E402
 from ptwin.physics.terms import VOCABULARY  # noqa: E402
