@@ -275,7 +275,8 @@ def test_a_simulated_next_curve_never_takes_a_recorded_curves_contact_correction
     renamed = ("next", *p.samples.curve_ids[1:])
     samples = replace(p.samples, curve_ids=renamed)
     design = replace(_design(p, settings), samples=samples)
-    pseudo, _ = design._pseudo_samples(simulate_curve(Experiment(samples=200), 8e-6, balance=False))
+    curve = simulate_curve(Experiment(samples=200), 8e-6, balance=False)
+    pseudo, _ = design._pseudo_samples(curve, fit_physics(p.make_model(()), p.samples, p.split.train))
     assert pseudo.curve_ids[0] not in renamed
     contact = ContactNuisance(renamed)
     with torch.no_grad():
@@ -288,10 +289,34 @@ def test_a_simulated_next_curves_noise_is_gained_by_the_laws_stiffness_as_a_reco
     # The design reads a proposed curve's χ² under the noise model: a sample's noise std there is σ·(1 + s/k_s) at
     # its depth, as on the recorded curves (``ReferenceCurve.noise_gain``); σ alone overstated every separation.
     settings, p = estimated
-    pseudo, _ = _design(p, settings)._pseudo_samples(simulate_curve(Experiment(samples=200), 8e-6, balance=False))
+    curve = simulate_curve(Experiment(samples=200), 8e-6, balance=False)
+    pseudo, _ = _design(p, settings)._pseudo_samples(curve, fit_physics(p.make_model(()), p.samples, p.split.train))
     gain = torch.from_numpy(p.noise_gain(pseudo.depth.numpy()))
     assert gain.max() > 1.05 and gain.min() == 1.0  # in contact, and before it
     torch.testing.assert_close(pseudo.noise_floor, p.noise.std * gain, rtol=1e-12, atol=0)
+
+
+def test_a_proposed_curve_is_read_for_what_it_adds_to_what_the_recorded_curves_tell_apart(estimated):
+    # The design's next curve is its truth's own force on the simulator's kinematics: refitted to it, the truth
+    # gains no misfit (the simulator's Hertz force had left a truth's own model 0.48 noise std off it over a soft
+    # cantilever's hold, which multiplied the models' difference). And the separation is what the curve adds: at
+    # most the other model's misfit to the train split's share of it at its own values (a term named weak, 548 units
+    # of χ² below the base model on the recorded curves, had had them counted as the new curve's).
+    settings, p = estimated
+    terms = ((), ("pore_pressure_relaxation",))
+    base, pore = (fit_with_starts(p.make_model, subset, p.samples, p.split.train) for subset in terms)
+    design = _design(p, settings)
+    # the slowest of the menu: the fluid force and its pore relaxation are weakest there
+    protocol = next(q for q in design._menu([pore, base]) if q.base_speed < min(design.speeds))
+    assert design._refitted_to(pore, pore, protocol) == pytest.approx(design._refitted_to(pore, pore, None), rel=1e-5)
+    pseudo, stride = design._pseudo_samples(design._simulate(pore, protocol), pore)
+    contact = pseudo.in_contact
+    with torch.no_grad():
+        own = ((base.model(pseudo) - pseudo.force)[contact] / pseudo.noise_floor[contact]).square().sum().item()
+    separation, _ = design._refit_separation(protocol, pore, base)
+    assert base.chi_square - pore.chi_square > 2 * own  # the recorded curves tell them apart more than it would
+    share = p.split.train.numel() / int(p.samples.fitted.sum())  # of a curve, what the fits are judged on
+    assert 0 < separation**2 * p.noise.inflation <= own * stride * share * (1 + 1e-3)
 
 
 SHARED_VISCOUS = Path(__file__).resolve().parents[2] / "shared" / "bench-sets" / "p05_visc_soft_real_noise" / "data"
