@@ -296,7 +296,7 @@ def test_a_simulated_next_curves_noise_is_gained_by_the_laws_stiffness_as_a_reco
     torch.testing.assert_close(pseudo.noise_floor, p.noise.std * gain, rtol=1e-12, atol=0)
 
 
-def test_a_proposed_curve_is_read_for_what_it_adds_to_what_the_recorded_curves_tell_apart(estimated):
+def test_a_proposed_curve_is_read_for_what_it_adds_to_what_the_recorded_curves_tell_apart(estimated, monkeypatch):
     # The design's next curve is its truth's own force on the simulator's kinematics: refitted to it, the truth
     # gains no misfit (the simulator's Hertz force had left a truth's own model 0.48 noise std off it over a soft
     # cantilever's hold, which multiplied the models' difference). And the separation is what the curve adds: at
@@ -317,6 +317,13 @@ def test_a_proposed_curve_is_read_for_what_it_adds_to_what_the_recorded_curves_t
     assert base.chi_square - pore.chi_square > 2 * own  # the recorded curves tell them apart more than it would
     share = p.split.train.numel() / int(p.samples.fitted.sum())  # of a curve, what the fits are judged on
     assert 0 < separation**2 * p.noise.inflation <= own * stride * share * (1 + 1e-3)
+    # A refit to the recorded curves alone that fails reads the fit's own χ² there, not an infinite separation.
+    failing = _design(p, settings)
+    refit = failing._refit
+    monkeypatch.setattr(
+        failing, "_refit", lambda fit, *args: math.inf if fit is base and args[0] is p.samples else refit(fit, *args)
+    )
+    assert failing._refit_separation(protocol, pore, base)[0] == pytest.approx(separation, rel=0.05)
 
 
 SHARED_VISCOUS = Path(__file__).resolve().parents[2] / "shared" / "bench-sets" / "p05_visc_soft_real_noise" / "data"

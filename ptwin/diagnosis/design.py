@@ -287,10 +287,12 @@ class ExperimentDesign:
         and the term stayed weak (the loop suite's case, seed 1)."""
         pseudo, stride = self._pseudo_samples(self._simulate(truth, protocol), truth)
         added = torch.nonzero(pseudo.in_contact).squeeze(1)
-        recorded = [self._refitted_to(truth, truth, None), self._refitted_to(other, truth, None)]
         joined = [self._refitted_to(truth, truth, protocol), self._refitted_to(other, truth, protocol)]
-        if not math.isfinite(joined[0]) or not math.isfinite(recorded[0]):
+        if not math.isfinite(joined[0]):
             return 0.0, math.inf  # the truth itself cannot be refitted: no evidence either way
+        # a refit to the recorded curves alone that fails (a start the model cannot evaluate) reads the fit's own
+        recorded = [self._refitted_to(fit, truth, None) for fit in (truth, other)]
+        recorded = [chi if math.isfinite(chi) else fit.chi_square for chi, fit in zip(recorded, (truth, other))]
         # the share of a recorded curve the fits are judged on (the train split), as the new one's will be
         share = self.index.numel() / max(int(self.samples.fitted.sum()), 1)
         excess = ((joined[1] - recorded[1]) - (joined[0] - recorded[0])) * stride * share
