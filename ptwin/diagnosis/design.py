@@ -12,13 +12,13 @@ a deeper reference curve as well, so it is not a one-curve proposal.
 A new curve separates two candidates A and B only if they cannot both refit it: what A
 predicts is appended to the data (the simulator's kinematics, A's own force there), both are
 refitted on everything (the recorded curves too), and the separation is √(Δχ²/κ²) with Δχ²
-what the curve adds to B's misfit over A's: each one's χ² less what it leaves refitted to the
-recorded curves alone (a term named weak beside the base model is told from it by these
-already) — in units of the noise model; the smaller of the two directions counts. A direction whose B contains A's
-terms is skipped: B then reproduces A's curve whatever it is (the base model is pore
-relaxation with M → ∞), and if A is true B's extra term fades to nothing, which the
-information criterion already settles. That takes fits, so every
-protocol is screened first by the candidates' difference at their current values (an
+what the curve's train share adds to B's misfit over A's: each one's χ² less what it leaves
+refitted to the recorded curves alone (a term named weak beside the base model is told from
+it by these already), in units of the noise model; the smaller of the two directions counts.
+A direction whose B contains A's terms is skipped: B then reproduces A's curve whatever it is
+(the base model is pore relaxation with M → ∞), and if A is true B's extra term fades to
+nothing, which the information criterion already settles. That takes fits, so every protocol
+is screened first by the candidates' difference at their current values (an
 optimistic bound: no refit) and the ``VERIFIED`` most promising are refitted.
 
 A separation is enough only where the diagnosis's own rules would then tell the two apart:
@@ -306,6 +306,7 @@ class ExperimentDesign:
         """χ² of ``fit`` refitted to the data with what ``truth`` predicts for ``protocol`` appended (None: to the
         recorded curves alone), from the truth's own values where ``fit`` is the truth, each once however many
         pairs ask."""
+        # alone, a fit refits from its own values as a truth and from every start as the other: two refits at most
         key = (id(fit), id(truth) if protocol is not None else fit is truth, protocol)
         if key not in self._refitted:
             starts = [truth.params] if fit is truth else None
