@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -47,22 +47,6 @@ SATURATED = 10
 _PLAUSIBLE = {"z": (1e-3, "m (micrometres?)"), "force": (1e-3, "N (nanonewtons?)"), "base_speed": (1e-2, "m/s (µm/s?)")}
 
 
-# The keys of meta.yaml in the recording format (v1.2): a key past them is read by nothing.
-KEYS = (
-    "format",
-    "sample",
-    "probe_radius",
-    "spring_constant",
-    "sample_thickness",
-    "fluid_viscosity",
-    "reference_curve",
-    "contact_point",
-    "noise_std",
-    "notes",
-    "position",
-)
-
-
 class RecordingError(ValueError):
     """Bad input in a recording set; the message is the one line to show the user."""
 
@@ -86,6 +70,10 @@ class Meta:
         """The import's note that these curves were recorded at several places (``PLACES`` on), else None."""
         start = self.notes.find(PLACES)
         return self.notes[start:] if start >= 0 else None
+
+
+# The keys of meta.yaml in the recording format (v1.2): its version and Meta's fields; any other is read by nothing.
+KEYS = ("format", *(f.name for f in fields(Meta)))
 
 
 @dataclass
