@@ -48,9 +48,14 @@ class ReferenceCurve(nn.Module):
     TAIL = 0.1  # fraction of the nodes (the deepest) the continuation's slope is read off
     CONTINUED = 0.25  # how far beyond the reference's depth (fraction of it) the continued law is used
 
+    @staticmethod
+    def read_from(reference: CurveKinematics) -> np.ndarray:
+        """bool: the reference's samples the law is read off, its approach in contact (F(w) there is a function)."""
+        return reference.in_contact & (reference.segment == APPROACH)
+
     def __init__(self, reference: CurveKinematics, nodes: int = 200, smoothing: float = 0.05):
         super().__init__()
-        use = reference.in_contact & (reference.segment == APPROACH)  # the approach: F(w) there is a function
+        use = self.read_from(reference)
         order = np.argsort(reference.depth[use])
         depth, force = reference.depth[use][order], reference.force[use][order]
         grid = np.linspace(0.0, depth[-1], nodes)

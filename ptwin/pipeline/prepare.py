@@ -206,7 +206,7 @@ def _check_noise(recordings: RecordingSet, curves: list[CurveKinematics]) -> Non
 def _check_law(recordings: RecordingSet, reference: CurveKinematics) -> None:
     """The reference curve's approach in contact is the elastic law: with fewer than ``MIN_SAMPLES`` samples there it
     cannot be read (with none, building it raised IndexError)."""
-    count = int((reference.in_contact & (reference.segment == APPROACH)).sum())
+    count = int(ReferenceCurve.read_from(reference).sum())
     if count < MIN_SAMPLES:
         raise UnsupportedSet(
             f"{recordings.path / 'curves.csv'}: curve {reference.curve!r}, the reference curve, has {count} approach "
