@@ -129,10 +129,11 @@ def _places(table: pd.DataFrame) -> list[str]:
             f"{len(missing)} of {len(table)} spots have no position in their meta.yaml ({listed(missing)}): the maps "
             "lay every spot out in reading order."
         )
-    if not missing:
-        at: dict[tuple[float, float], list[str]] = {}
-        for spot, x, y in zip(table["spot"], table["x"], table["y"]):
-            at.setdefault((round(x * 1e9), round(y * 1e9)), []).append(spot)  # to the nanometre, as ``grid``
+    place = grid(table)
+    if place is not None:
+        at: dict[tuple[int, int], list[str]] = {}
+        for spot, column, row in zip(table["spot"], *place):
+            at.setdefault((column, row), []).append(spot)
         shared = [spots for spots in at.values() if len(spots) > 1]
         if shared:
             said.append(
