@@ -123,6 +123,7 @@ class ExperimentDesign:
     noise_gain: Callable[[np.ndarray], np.ndarray] | None = None  # depth → the noise's gain in a residual (None: 1)
     _simulated: dict = field(default_factory=dict, repr=False)  # (candidate, protocol) → CurveSimulation or its error
     _refitted: dict = field(default_factory=dict, repr=False)  # (candidate, truth, protocol) → χ² refitted
+    _predicted: dict = field(default_factory=dict, repr=False)  # (truth, protocol) → its curve's samples, stride
 
     def propose(self, names: list[str], fits: list[PhysicsFit]) -> tuple[dict, Prediction] | None:
         """``next_experiment`` for the candidates ``fits`` (named ``names``; two or more: every pair must be
@@ -285,7 +286,7 @@ class ExperimentDesign:
         the recorded curves, was proposed a hold predicted to separate them by 20× the noise a curve, 9× once that
         was no part of it, 7.7× on the train split's 70%; each of the four such curves recorded added 5–7× there,
         and the term stayed weak (the loop suite's case, seed 1)."""
-        pseudo, stride = self._pseudo_samples(self._simulate(truth, protocol), truth)
+        pseudo, stride = self._predicted_curve(truth, protocol)
         added = torch.nonzero(pseudo.in_contact).squeeze(1)
         joined = [self._refitted_to(truth, truth, protocol), self._refitted_to(other, truth, protocol)]
         if not math.isfinite(joined[0]):
@@ -313,7 +314,7 @@ class ExperimentDesign:
             if protocol is None:
                 self._refitted[key] = self._refit(fit, self.samples, self.index, starts)
             else:
-                pseudo, _ = self._pseudo_samples(self._simulate(truth, protocol), truth)
+                pseudo, _ = self._predicted_curve(truth, protocol)
                 joined = self.samples.join(pseudo)
                 index = torch.cat([self.index, len(self.samples) + torch.nonzero(pseudo.in_contact).squeeze(1)])
                 self._refitted[key] = self._refit(fit, joined, index, starts)
@@ -334,6 +335,13 @@ class ExperimentDesign:
             return fit_physics(model, samples, index, REFIT, REFIT_TOLERANCE, fit.reference_free).chi_square
         except FitError:
             return math.inf
+
+    def _predicted_curve(self, truth: PhysicsFit, protocol: Protocol) -> tuple[Samples, int]:
+        """``_pseudo_samples`` of ``truth`` under ``protocol``, built once however many refits read it."""
+        key = (id(truth), protocol)
+        if key not in self._predicted:
+            self._predicted[key] = self._pseudo_samples(self._simulate(truth, protocol), truth)
+        return self._predicted[key]
 
     def _pseudo_samples(self, curve: CurveSimulation, truth: PhysicsFit) -> tuple[Samples, int]:
         """What ``truth`` predicts for the protocol of ``curve`` (its simulation) as samples of a curve 'next'
