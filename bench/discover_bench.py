@@ -299,12 +299,14 @@ def diagnose(
 def run_seeds(overrides: list[str], scratch: Path, count: int) -> None:
     """``count`` nulls and as many sets with ``SEEDED_TERM`` in the ``SEEDED`` setting, one seed each, diagnosed and
     tallied: how often noise alone is taken for a term or for unexplained structure, how often the term is named,
-    another named in its place, or nothing; and the block inflation the nulls were judged under against the one
-    the noise has."""
+    another named in its place, or nothing; how often K's 95% interval covers the truth, and the term's strength
+    interval where it is named; and the block inflation the nulls were judged under against the one the noise has."""
     ((term, params),) = SEEDED_TERM.items()
     truth = model_inflation(1.0 - SEEDED["noise_white_share"], SEEDED["noise_correlation"], 50)
     print(f"\nseeds: {count} nulls and {count} sets with {term} {params} in the bench-sets' p01/p07 setting")
     alarms, named, strong, other, nothing, inflations = 0, 0, 0, 0, 0, []
+    covered = {"null": 0, "term": 0}  # K's interval holds the truth
+    (strength, value), held = next(iter(params.items())), 0  # the term's named strength interval holds the truth
     for seed in range(count):
         outcome = {}
         for label, effects in (("null", {}), ("term", SEEDED_TERM)):
@@ -313,12 +315,14 @@ def run_seeds(overrides: list[str], scratch: Path, count: int) -> None:
             outcome[label] = " + ".join(f"{e['term']} ({e['confidence']})" for e in d["left_out"]) or "-"
             if d["unexplained"]:
                 outcome[label] += " unexplained"
+            covered[label] += within(d["permeability"]["corrected_interval"], experiment.permeability)
             if label == "null":
                 alarms += d["mismatch"]["detected"] or bool(d["left_out"])
                 inflations.append(d["noise"]["inflation"])
             else:
                 terms = {e["term"]: e["confidence"] for e in d["left_out"]}
                 named += term in terms
+                held += any(e["term"] == term and within(e["param_interval"][strength], value) for e in d["left_out"])
                 strong += terms.get(term) == "strong"
                 other += bool(set(terms) - {term})
                 nothing += not terms
@@ -329,9 +333,19 @@ def run_seeds(overrides: list[str], scratch: Path, count: int) -> None:
         f"{term} named {named}/{count} ({strong} strong); another term named {other}/{count}; nothing {nothing}/{count}"
     )
     print(
+        f"K's 95% interval covers the truth on {covered['null']}/{count} nulls and {covered['term']}/{count} sets with "
+        f"{term}; its {strength}'s on {held} of the {named} that name it"
+    )
+    print(
         f"block inflation the nulls' diagnoses used: median {middle:.1f} (5–95%: {low:.1f}–{high:.1f}), "
         f"against {truth:.1f} of the noise drawn"
     )
+
+
+def within(interval: list[float | None], truth: float) -> bool:
+    """Whether a reported interval (None: a side open) holds ``truth``."""
+    low, high = interval
+    return (low is None or low <= truth) and (high is None or truth <= high)
 
 
 def proposed(d: dict) -> list[dict]:
