@@ -1122,7 +1122,7 @@ def test_k_gets_a_standard_error_only_where_its_interval_is_its_own_fit_s(monkey
     base, rival = candidate((), 1000.0, 1e-9), candidate(("a",), 1000.0, 1e-9)
     rival.fit.permeability, rival.fit.permeability_std = 1.7e-15, 1.5e-15
     candidates, split = {(): base, ("a",): rival}, SimpleNamespace(train=None)
-    context = SimpleNamespace(corrected=base, candidates=candidates, samples=None, split=split)
+    context = SimpleNamespace(corrected=base, candidates=candidates, samples=None, split=split, test=None)
     profiles = {id(base.fit): (2.5e-16, 3.5e-16), id(rival.fit): (6.6e-18, 4.3e-13)}
     monkeypatch.setattr(
         diagnose, "_permeability_interval", lambda fit, *_, **__: tuple(map(math.log, profiles[id(fit)]))
@@ -1147,7 +1147,9 @@ def test_k_s_interval_covers_each_rivals_own_profile_interval_not_its_wald_range
     base.fit.permeability, base.fit.permeability_std = 1.32e-16, 0.02e-16
     rival.fit.permeability, rival.fit.permeability_std = 1.5e-16, 0.21e-16  # Wald: ×/÷ exp(1.96 · 0.14)
     candidates = {(): base, ("a",): rival}
-    context = SimpleNamespace(corrected=base, candidates=candidates, samples=None, split=SimpleNamespace(train=None))
+    context = SimpleNamespace(
+        corrected=base, candidates=candidates, samples=None, split=SimpleNamespace(train=None), test=None
+    )
     profiles = {id(base.fit): (1.27e-16, 1.38e-16), id(rival.fit): (1.19e-16, rival_high)}
     monkeypatch.setattr(
         diagnose,
@@ -1179,7 +1181,7 @@ def test_k_s_interval_is_widened_by_what_the_fluid_layer_may_be_off_the_exact_da
     )
     monkeypatch.setattr(diagnose, "profile_interval", lambda *_, **__: (math.log(1.99918e-16), math.log(1.99988e-16)))
     monkeypatch.setattr(diagnose, "closed_form_error", lambda basis: 2.0e-4)
-    low, high = diagnose._permeability_interval(fit, None, None)
+    low, high = diagnose._permeability_interval(fit, None, None, None)
     assert math.exp(low) == pytest.approx(1.99918e-16 / 1.0002, rel=1e-12, abs=0)
     assert math.exp(high) == pytest.approx(1.99988e-16 / 0.9998, rel=1e-12, abs=0)
     assert math.exp(low) < 2e-16 < math.exp(high)
@@ -1334,7 +1336,7 @@ def test_a_model_not_ruled_out_widens_k_s_interval_only_where_its_profile_reache
 
     asked = []
 
-    def profile(fit, samples, index, beyond):
+    def profile(fit, samples, index, test, beyond):
         asked.append(beyond)
         sides = [None if side is None else math.log(side) for side in other]
         low = beyond[0] if sides[0] is not None and sides[0] >= beyond[0] else sides[0]
@@ -1344,14 +1346,14 @@ def test_a_model_not_ruled_out_widens_k_s_interval_only_where_its_profile_reache
     monkeypatch.setattr(diagnose, "_permeability_interval", profile)
     candidates = {("a",): candidate(("a",), 1000.0, 1e-9)}
     interval = (math.log(2.21e-16), math.log(2.51e-16))
-    found = diagnose._reaching(candidates, [("a",)], interval, 2.37e-16, None, None)
+    found = diagnose._reaching(candidates, [("a",)], interval, 2.37e-16, None, None, None)
     assert [tuple(map(math.exp, points)) for points in asked] == [
         pytest.approx((2.21e-16 - 0.02 * 2.37e-16, 2.51e-16 + 0.02 * 2.37e-16), rel=1e-12, abs=0)
     ]
     assert list(found) == [("a",)] * reaches
     if reaches and other[1] is not None:  # a side that does not reach is the interval's own (searched only so far)
         assert found[("a",)][1] == interval[1]
-    open_above = diagnose._reaching(candidates, [("a",)], (interval[0], None), 2.37e-16, None, None)
+    open_above = diagnose._reaching(candidates, [("a",)], (interval[0], None), 2.37e-16, None, None, None)
     assert asked[-1][1] == math.inf
     assert bool(open_above) == (other[0] < 2.1e-16)
 

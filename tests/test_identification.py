@@ -386,10 +386,10 @@ def test_an_interval_refits_a_held_reference_correction_and_covers_what_the_cont
     fit = fit_with_starts(p.make_model, ("solid_relaxation",), p.samples, train, iterations, base)
     held = held_at(fit)
     assert held is not None
-    low, high = parameter_interval(fit, "solid_relaxation", "g", p.samples, train)
+    low, high = parameter_interval(fit, "solid_relaxation", "g", p.samples, train, None)
     assert held_at(fit) == held  # the model as fitted: the profile only evaluates it elsewhere
     monkeypatch.setattr(intervals, "held_range", lambda fit: None)  # held in the profile too
-    held_low, held_high = parameter_interval(fit, "solid_relaxation", "g", p.samples, train)
+    held_low, held_high = parameter_interval(fit, "solid_relaxation", "g", p.samples, train, None)
     assert low < held_low < fit.params["solid_relaxation"]["g"] < held_high < high
     assert 0.19 < low and high < 0.22
 

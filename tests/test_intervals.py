@@ -67,6 +67,28 @@ def test_the_profile_of_a_linear_model_is_the_textbook_interval_times_the_noise_
     assert high == pytest.approx(b + half, rel=1e-3)
 
 
+def test_a_smooth_parameter_s_interval_reads_the_noise_along_its_own_shape_not_the_block_inflation():
+    # AR(1) noise of 20-sample memory: the means of 20-sample blocks vary κ² = 14.7 times white noise's, but the
+    # slope sums the noise over all 400 samples, where the noise along its shape varies λ = 34.1 times white noise's
+    # (exact, from the AR(1) covariance). Read with κ² the interval was 0.66 of the width the noise gives it; read
+    # with the structure test's simulated noise (200 draws, λ 32.5) 0.98.
+    from ptwin.data.noise import NoiseModel, model_inflation
+    from ptwin.diagnosis.null import structure_test
+
+    memory, block = math.exp(-1.0 / 20.0), 20
+    samples = line_samples(model_inflation(1.0, memory, block))
+    fit, index = fitted_line(samples)
+    noise = NoiseModel(0.1, memory, samples.noise_inflation, 0.0, "AR(1)", len(samples), share=1.0, memory=memory)
+    test = structure_test(samples, index, None, noise, block, 0.01)
+    low, high = profile_interval(fit, "b", textbook_std(samples, fit), samples, index, noise=test)
+    shape = (samples.time - samples.time.mean()) / 0.1  # the slope's column, the intercept's projected out
+    lags = torch.arange(len(samples), dtype=torch.float64)
+    along = (shape @ memory ** (lags[:, None] - lags[None, :]).abs() @ shape / (shape @ shape)).item()
+    reduced = max(1.0, fit.chi_square / (len(samples) - 2))
+    assert along > 2.0 * samples.noise_inflation
+    assert (high - low) / 2 == pytest.approx(math.sqrt(LEVEL * along * reduced / (shape @ shape).item()), rel=0.1)
+
+
 @pytest.mark.parametrize("first, refits", [(0.5, 4), (2.0, 6)])
 def test_a_quadratic_profile_is_closed_at_its_second_point_a_side_from_a_first_step_off_its_end(
     first, refits, monkeypatch
@@ -301,9 +323,9 @@ def test_each_profile_point_is_refitted_to_convergence_where_k_moves_far(soft_po
     from ptwin.diagnosis.diagnose import parameter_interval
 
     samples, index, _, fit = soft_pore
-    low, _ = parameter_interval(fit, PORE, "M", samples, index)
+    low, _ = parameter_interval(fit, PORE, "M", samples, index, None)
     monkeypatch.setattr(intervals, "REFIT", 400)
-    converged, _ = parameter_interval(fit, PORE, "M", samples, index)
+    converged, _ = parameter_interval(fit, PORE, "M", samples, index, None)
     assert low == pytest.approx(converged, rel=0.02, abs=0)
 
 
@@ -322,7 +344,7 @@ def test_a_term_doing_nothing_at_its_fit_is_a_rival_where_its_k_s_interval_reach
     assert _restarts(fit) == tuple({f"terms.{PORE}.log_M": math.log(m)} for m in (1e3, 1e4, 1e5, 1e6))
     assert _restarts(base) == ()
     candidates = {(): Candidate((), base, 0.0, 0.0), (PORE,): Candidate((PORE,), fit, 0.0, 0.0)}
-    known = _past_the_base_model(candidates, [(PORE,)], samples, index)
+    known = _past_the_base_model(candidates, [(PORE,)], samples, index, None)
     (low, high), (pore_low, _) = (tuple(map(math.exp, known[()])), tuple(map(math.exp, known[(PORE,)])))
     assert not low <= 2e-16 <= high
     assert pore_low < 2e-16

@@ -217,14 +217,14 @@ def diagnose(
     notes += [f"{' + '.join(t) or 'base'}: {c.state}" for t, c in candidates.items() if c.without_effect]
     notes += _permeability_notes(candidates[pick.chosen].fit, samples) + _unsettled_notes(base, corrected)
     fit = _fit_table(samples, split, base, corrected, twin)
-    rivals, unruled, known = _alternatives(candidates, pick, s, held_out, samples, split.train)
+    rivals, unruled, known = _alternatives(candidates, pick, s, held_out, samples, split.train, test)
     confounds = [_confound(chosen, other, candidates) for other in rivals]
     predictions = _tell_apart(confounds, rivals, corrected, candidates, design, progress) if design is not None else []
     progress("diagnosis: the named terms on curves left out of the fit, and intervals under the noise model")
     witness = _witness(hybrid, samples, seen, corrected, base)
     left = test.words(corrected.whiteness) if pick.unexplained else None
     context = _Context(
-        samples, split, seen, candidates, corrected, fit, noise, witness, left, pick.on_curves, pick.unproven
+        samples, split, seen, candidates, corrected, fit, noise, test, witness, left, pick.on_curves, pick.unproven
     )
     left_out = [_left_out_entry(term, chosen, context, rivals, make_model, s) for term in chosen]
     if design is not None and not pick.unexplained:  # no recording makes a term strong beside unexplained structure
@@ -641,7 +641,13 @@ def _rivals(candidates: dict, pick: _Selection, s: DiagnosisSettings, held_out: 
 
 
 def _alternatives(
-    candidates: dict, pick: _Selection, s: DiagnosisSettings, held_out: HeldOutTest, samples: Samples, index
+    candidates: dict,
+    pick: _Selection,
+    s: DiagnosisSettings,
+    held_out: HeldOutTest,
+    samples: Samples,
+    index,
+    test: StructureTest,
 ) -> tuple[list[tuple[str, ...]], list[tuple[str, ...]], dict]:
     """The rivals of the chosen subset (``_rivals``, and beside nothing named ``_past_the_base_model``'s), the larger
     subsets not ruled out whose K's interval ``_permeability`` screens (``_not_ruled_out``), and the K intervals
@@ -650,12 +656,12 @@ def _alternatives(
     unruled = [t for t in _not_ruled_out(candidates, pick.chosen, s.bic_margin) if t not in rivals]
     if pick.chosen or pick.unexplained:
         return rivals, unruled, {}
-    known = _past_the_base_model(candidates, unruled, samples, index)  # beside nothing named: rivals or nothing
+    known = _past_the_base_model(candidates, unruled, samples, index, test)  # beside nothing named: rivals or nothing
     return rivals + [t for t in known if t and t not in rivals], [], known
 
 
 def _past_the_base_model(
-    candidates: dict, singles: list[tuple[str, ...]], samples: Samples, index: torch.Tensor
+    candidates: dict, singles: list[tuple[str, ...]], samples: Samples, index: torch.Tensor, test: StructureTest | None
 ) -> dict[tuple[str, ...], tuple[float | None, float | None]]:
     """Nothing named: K's interval under the base model (log K, by ``()``) and each of ``singles`` (not ruled out:
     ``_not_ruled_out``) whose K's interval reaches materially past it (``_reaching``), which is a rival as one with
@@ -664,8 +670,8 @@ def _past_the_base_model(
     base model's, and counted as no rival; its profile refits M, which acts where K is lower: K's interval under
     the pore reaches 1.87e-16 m², under the base model [2.21e-16, 2.51e-16], the truth 2e-16."""
     base = candidates[()].fit
-    known = {(): _permeability_interval(base, samples, index)}
-    return known | _reaching(candidates, singles, known[()], base.permeability, samples, index)
+    known = {(): _permeability_interval(base, samples, index, test)}
+    return known | _reaching(candidates, singles, known[()], base.permeability, samples, index, test)
 
 
 def _not_ruled_out(candidates: dict, chosen: tuple[str, ...], bic_margin: float) -> list[tuple[str, ...]]:
@@ -727,6 +733,7 @@ class _Context:
     corrected: Candidate
     fit: dict[str, dict[str, float]]
     noise: NoiseModel
+    test: StructureTest  # the structure test's null: what a unit of Δχ² is worth along a profile (``intervals``)
     witness: float | None  # share of the hybrid network's learned error the named terms account for (None: no twin)
     unexplained: str | None  # the structure the named terms leave, in words (None: they leave none)
     on_curves: dict[str, OnCurvesLeftOut]  # ``held_out_curves`` of the named terms the selection already ran
@@ -955,9 +962,14 @@ def _permeability_notes(fit: PhysicsFit, samples: Samples) -> list[str]:
 
 
 def _permeability_interval(
-    fit: PhysicsFit, samples: Samples, index: torch.Tensor, beyond: tuple[float, float] | None = None
+    fit: PhysicsFit,
+    samples: Samples,
+    index: torch.Tensor,
+    test: StructureTest | None,
+    beyond: tuple[float, float] | None = None,
 ) -> tuple[float | None, float | None]:
-    """``fit``'s 95% profile interval of log K on ``samples[index]`` (None: a side the data do not close), widened by
+    """``fit``'s 95% profile interval of log K on ``samples[index]`` under ``test``'s noise (``profile_interval``: None,
+    κ²'s; a side the data do not close: None), widened by
     what its fluid layer may be off the exact Darcy force (``closed_form_error``, ε): the force is ∝ 1/K, so a force
     (1 + δ) times the exact one, |δ| ≤ ε, gives a K (1 + δ) times the exact one's. The noise alone fixes K more
     tightly than that on stiff sets: on discover-bench's nulls, K 0.009% (one std) from its fit against the default
@@ -967,7 +979,7 @@ def _permeability_interval(
     raw_std = fit.permeability_std / fit.permeability
     error = closed_form_error(fit.model.fluid.basis)
     raw = (None, None) if beyond is None else (beyond[0] + math.log1p(error), beyond[1] + math.log1p(-error))
-    low, high = profile_interval(fit, PERMEABILITY, raw_std, samples, index, beyond=raw, starts=_restarts(fit))
+    low, high = profile_interval(fit, PERMEABILITY, raw_std, samples, index, raw, _restarts(fit), test)
     return (None if low is None else low - math.log1p(error), None if high is None else high - math.log1p(-error))
 
 
@@ -990,7 +1002,13 @@ def _restarts(fit: PhysicsFit) -> tuple[dict[str, float], ...]:
 
 
 def _reaching(
-    candidates: dict, subsets: list[tuple[str, ...]], interval: tuple, reference: float, samples: Samples, index
+    candidates: dict,
+    subsets: list[tuple[str, ...]],
+    interval: tuple,
+    reference: float,
+    samples: Samples,
+    index,
+    test: StructureTest | None,
 ) -> dict[tuple[str, ...], tuple[float | None, float | None]]:
     """The ``subsets`` whose K's profile interval reaches past ``interval`` (log K, widened; None: open) by more than
     ``MATERIAL`` of K ``reference`` [m²] (a difference a user would act on), each with ``interval`` widened to
@@ -1002,7 +1020,7 @@ def _reaching(
     points = _material(interval, reference)
     found = {}
     for terms in subsets:
-        other = _permeability_interval(candidates[terms].fit, samples, index, beyond=points)
+        other = _permeability_interval(candidates[terms].fit, samples, index, test, beyond=points)
         lower, higher = _past(other, points)
         if lower or higher:
             found[terms] = (other[0] if lower else interval[0], other[1] if higher else interval[1])
@@ -1042,26 +1060,26 @@ def _alone_interval(term: str, c: _Context, test: StructureTest) -> list[float |
     candidate = c.candidates[(term,)]
     if candidate.leaves_structure(test):
         return None
-    return parameter_interval(candidate.fit, term, VOCABULARY[term].strength(), c.samples, c.split.train)
+    return parameter_interval(candidate.fit, term, VOCABULARY[term].strength(), c.samples, c.split.train, test)
 
 
 def _parameter_intervals(fit: PhysicsFit, term: str, c: _Context) -> dict[str, list[float | None]]:
     """95% profile-likelihood intervals of the term's parameters (``parameter_interval``)."""
     names = fit.model.terms[term].PARAMS
-    return {name: parameter_interval(fit, term, name, c.samples, c.split.train) for name in names}
+    return {name: parameter_interval(fit, term, name, c.samples, c.split.train, c.test) for name in names}
 
 
 def parameter_interval(
-    fit: PhysicsFit, term: str, name: str, samples: Samples, index: torch.Tensor
+    fit: PhysicsFit, term: str, name: str, samples: Samples, index: torch.Tensor, test: StructureTest | None
 ) -> list[float | None]:
     """The 95% profile-likelihood interval of ``term``'s parameter ``name`` in ``fit``, on ``samples[index]`` (the
-    samples it was fitted on), physical units (None: not bounded), a closed side beyond a physical limit (gamma ≥
-    0) drawn back to it."""
+    samples it was fitted on), under ``test``'s noise (``profile_interval``; None: κ²'s), physical units (None: not
+    bounded), a closed side beyond a physical limit (gamma ≥ 0) drawn back to it."""
     module = fit.model.terms[term]
     parameter = module.PARAMS[name]
     value, std = fit.params[term][name], fit.param_std[term][name]
     raw_std = std / abs(value) if parameter.log and value else std
-    low, high = profile_interval(fit, fit.model.fitted_name(term, name), raw_std, samples, index)
+    low, high = profile_interval(fit, fit.model.fitted_name(term, name), raw_std, samples, index, noise=test)
     to_value = _exp_or_none if parameter.log else _float_or_none
     low, high = to_value(low), to_value(high)
     if low is not None and parameter.minimum is not None:
@@ -1115,12 +1133,13 @@ def _permeability(
 
     def profiled(terms: tuple[str, ...]) -> tuple[float | None, float | None]:
         found = known.get(terms)
-        return found if found is not None else _permeability_interval(c.candidates[terms].fit, c.samples, c.split.train)
+        fit = c.candidates[terms].fit
+        return found if found is not None else _permeability_interval(fit, c.samples, c.split.train, c.test)
 
     low, high = profiled(c.corrected.terms)
     for other in alternatives:  # the base model too, when it is a rival
         low, high = _union((low, high), profiled(other))
-    further = _reaching(c.candidates, reach, (low, high), corrected.permeability, c.samples, c.split.train)
+    further = _reaching(c.candidates, reach, (low, high), corrected.permeability, c.samples, c.split.train, c.test)
     for other in further.values():
         low, high = _union((low, high), other)
     notes = [

@@ -77,6 +77,7 @@ class StructureTest:
     tolerated: float  # W a model error of MODEL_ERROR adds: block · e² / κ²
     draws: np.ndarray = field(compare=False, repr=False)  # (tested samples, REPLICATES)
     noise_blocks: float = math.inf  # ν: independent block means the noise model's correlation rests on
+    tested: np.ndarray | None = field(default=None, compare=False, repr=False)  # the draws' samples (time-ordered)
 
     @property
     def threshold(self) -> float:
@@ -97,6 +98,21 @@ class StructureTest:
         if norm <= 0.0:
             return 1.0
         return max(1.0, float(np.mean((shape @ self.draws) ** 2)) / norm)
+
+    def inflation_on(self, index: torch.Tensor, shape: np.ndarray, elsewhere: float) -> float:
+        """λ of ``shape`` given on the samples ``index`` (noise units): its part on the tested samples as
+        ``inflation_along`` reads it, the rest (samples the test does not simulate: those just before contact) at
+        ``elsewhere`` (the set's κ²), each by its share of the shape's squared norm, the two parts' cross terms
+        neglected (the noise's memory reaches across the contact over a few samples at most)."""
+        samples = index.cpu().numpy()
+        at = np.searchsorted(self.tested, samples).clip(max=self.tested.size - 1)
+        on = self.tested[at] == samples
+        tested = np.zeros(self.tested.size)
+        tested[at[on]] = shape[on]
+        inside, outside = float(shape[on] @ shape[on]), float(shape[~on] @ shape[~on])
+        if inside + outside <= 0.0:
+            return elsewhere
+        return (self.inflation_along(tested) * inside + elsewhere * outside) / (inside + outside)
 
     def words(self, whiteness: float) -> str:
         """The statistic against its threshold, in words."""
@@ -137,6 +153,7 @@ def structure_test(
         block * MODEL_ERROR**2 / samples.noise_inflation,
         residual,
         noise.blocks,
+        index.cpu().numpy(),
     )
 
 

@@ -47,6 +47,7 @@ import torch
 
 from ptwin.data.recordings import write_recordings
 from ptwin.diagnosis.diagnose import parameter_interval
+from ptwin.diagnosis.null import structure_test
 from ptwin.diagnosis.words import bounded, number, permeability_words
 from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, fit_with_starts
@@ -335,7 +336,7 @@ def detection(settings: InjectRunSettings, output_dir: Path, progress: Callable[
     progress(f"inject: the recordings as they are ({len(inject.sizes) + 1} diagnoses in all)")
     as_recorded, prepared, base_fit = _as_recorded(settings, output_dir, [inject.term])
     trials = [_trial(0.0, None, 0.0, as_recorded, inject.term, strength)]
-    own = native_strength(prepared, inject.term, settings.optim.physics_fit.iterations, base_fit, trials[0])
+    own = native_strength(prepared, inject.term, settings, base_fit, trials[0])
     progress(f"  as recorded: {trials[0].verdict(own)}; {own.words()}")
     for i, size in enumerate(sorted(inject.sizes), start=1):
         params = inject.scaled(size)
@@ -372,7 +373,7 @@ def detection_limits(
             continue
         strength = VOCABULARY[term].strength()
         recorded = _trial(0.0, None, 0.0, as_recorded, term, strength)
-        native[term] = native_strength(prepared, term, settings.optim.physics_fit.iterations, base_fit, recorded)
+        native[term] = native_strength(prepared, term, settings, base_fit, recorded)
         if recorded.confidence:  # every size would be named: the ladder would read the recordings, not the size
             already.add(term)
             held = f"{strength} {recorded.found_words()}"
@@ -645,7 +646,9 @@ def no_candidate(term: str, trials: list[Trial], listed: list[str]) -> str | Non
     return f"{term} was no candidate in these recordings ({reason}): no size of it can be named in them"
 
 
-def native_strength(prepared: Prepared, term: str, iterations: int, base_fit: PhysicsFit, as_recorded: Trial) -> Own:
+def native_strength(
+    prepared: Prepared, term: str, settings: InjectRunSettings, base_fit: PhysicsFit, as_recorded: Trial
+) -> Own:
     """The term's strength the recordings fit as they are, named or not: what a size found is read against.
     Where their diagnosis (``as_recorded``) names it, its value there, beside the other terms named with it (a
     size added is then found in that model: on a real creep named with a power law, g 0.148, where alone it fits
@@ -654,7 +657,8 @@ def native_strength(prepared: Prepared, term: str, iterations: int, base_fit: Ph
     before a diagnosis caps it, a real PAAm place said "gamma fitted alone: 0.246 (95%: 0 to 0.85)" and "read over
     the recordings' own gamma 0.246 (95%: 0 to 1.11)" in one line. Where it did not (no candidate there: a drag
     whose removed per-curve levels take it), fitted alone here, from the starts the diagnosis gives it
-    (``base_fit``: the base model fitted to the training samples)."""
+    (``base_fit``: the base model fitted to the training samples), its interval under the structure test's noise as
+    the diagnosis reads one (``settings.diagnosis``)."""
     strength = VOCABULARY[term].strength()
     parameter = VOCABULARY[term].PARAMS[strength]
     absent = 0.0 if parameter.absent is None else parameter.absent  # a strength no one value removes: read from 0
@@ -667,13 +671,19 @@ def native_strength(prepared: Prepared, term: str, iterations: int, base_fit: Ph
         return Own(strength, as_recorded.alone, absent, interval, misses_data=as_recorded.alone_misses_data)
     samples, train = prepared.samples, prepared.split.train
     try:
-        fit = fit_with_starts(prepared.make_model, (term,), samples, train, iterations, base_fit)
+        fit = fit_with_starts(
+            prepared.make_model, (term,), samples, train, settings.optim.physics_fit.iterations, base_fit
+        )
     except FitError:
         return Own(strength, None, absent)
     if not fit.physical:
         return Own(strength, None, absent)
     # the structure test on the term fitted alone is the diagnosis's (``Trial.alone_misses_data``)
-    interval = parameter_interval(fit, term, strength, samples, train)
+    s = settings.diagnosis
+    test = structure_test(
+        samples, prepared.split.judged(samples), prepared.make_model.reference, prepared.noise, s.block, s.false_alarm
+    )
+    interval = parameter_interval(fit, term, strength, samples, train, test)
     return Own(strength, fit.params[term][strength], absent, interval, as_recorded.alone_misses_data)
 
 
