@@ -80,7 +80,7 @@ def test_a_smooth_parameter_s_interval_reads_the_noise_along_its_own_shape_not_t
     fit, index = fitted_line(samples)
     noise = NoiseModel(0.1, memory, samples.noise_inflation, 0.0, "AR(1)", len(samples), share=1.0, memory=memory)
     test = structure_test(samples, index, None, noise, block, 0.01)
-    low, high = profile_interval(fit, "b", textbook_std(samples, fit), samples, index, noise=test)
+    low, high = profile_interval(fit, "b", textbook_std(samples, fit), samples, index, test=test)
     shape = (samples.time - samples.time.mean()) / 0.1  # the slope's column, the intercept's projected out
     lags = torch.arange(len(samples), dtype=torch.float64)
     along = (shape @ memory ** (lags[:, None] - lags[None, :]).abs() @ shape / (shape @ shape)).item()

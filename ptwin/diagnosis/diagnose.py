@@ -968,8 +968,8 @@ def _permeability_interval(
     test: StructureTest | None,
     beyond: tuple[float, float] | None = None,
 ) -> tuple[float | None, float | None]:
-    """``fit``'s 95% profile interval of log K on ``samples[index]`` under ``test``'s noise (``profile_interval``: None,
-    κ²'s; a side the data do not close: None), widened by
+    """``fit``'s 95% profile interval of log K on ``samples[index]`` under ``test``'s noise (``profile_interval``; None:
+    κ²'s), None on a side the data do not close, widened by
     what its fluid layer may be off the exact Darcy force (``closed_form_error``, ε): the force is ∝ 1/K, so a force
     (1 + δ) times the exact one, |δ| ≤ ε, gives a K (1 + δ) times the exact one's. The noise alone fixes K more
     tightly than that on stiff sets: on discover-bench's nulls, K 0.009% (one std) from its fit against the default
@@ -1079,7 +1079,7 @@ def parameter_interval(
     parameter = module.PARAMS[name]
     value, std = fit.params[term][name], fit.param_std[term][name]
     raw_std = std / abs(value) if parameter.log and value else std
-    low, high = profile_interval(fit, fit.model.fitted_name(term, name), raw_std, samples, index, noise=test)
+    low, high = profile_interval(fit, fit.model.fitted_name(term, name), raw_std, samples, index, test=test)
     to_value = _exp_or_none if parameter.log else _float_or_none
     low, high = to_value(low), to_value(high)
     if low is not None and parameter.minimum is not None:

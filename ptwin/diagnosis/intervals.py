@@ -3,21 +3,20 @@
 For one parameter of a fitted model the profile χ²_p(θ) is the least χ² with θ fixed and every other parameter
 refitted (a contact correction the fit holds too, within its range: ``held_range``). Under correlated noise the
 likelihood-ratio statistic is Δχ²/κ² (κ²: the noise model's block-variance inflation; given the structure test's
-null, the noise model's inflation along the parameter's own profile shape where that is larger, read against F(1, ν):
-``_noise_along``), also divided by the reduced χ² of the fit where that exceeds 1 (the misfit is then larger than
-the noise model says, as the Wald variance assumes too), and the interval is where it stays ≤ 3.84 (χ² with one
-degree of freedom). Each side is found on the
-raw parameter (log K, log M, log tau: asymmetric intervals where the data are) by regula falsi (Illinois) on √Δ −
-√3.84, which is nearly linear in θ, from the Wald step outward (each outward point where the line through the last
-two meets the level). A side the data do not close within ``REACH`` steps of ×4 is None: the parameter is not
-bounded there. So is a side where the model stops being evaluable before the data close it (e.g. K so small that the
-Darcy force overflows): a failure of the model is no evidence against the parameter, and bisecting towards it would
-report the place where the arithmetic broke as a bound the data set. Given points ``beyond`` (an interval found
-already), each side is searched only past its point: where the profile closes before it, the point is returned (one
-refit a side where that is all a caller needs to know). Each profile point's refit runs LM as the fits do
-(``physics_solver``): with LM's defaults it stopped short where K must move far from the last point (a pore
-relaxation doing nothing at its fit on a soft cantilever: M's lower end 6.29e3 Pa for 3.78e3 converged).
-"""
+null, the noise model's inflation along the parameter's own profile shape where that is larger, read against F(1,
+ν): ``_noise_along``), also divided by the reduced χ² of the fit where that exceeds 1 (the misfit is then larger
+than the noise model says, as the Wald variance assumes too), and the interval is where it stays ≤ 3.84 (χ² with one
+degree of freedom). Each side is found on the raw parameter (log K, log M, log tau: asymmetric intervals where the
+data are) by regula falsi (Illinois) on √Δ − √3.84, which is nearly linear in θ, from the Wald step outward (each
+outward point where the line through the last two meets the level). A side the data do not close within ``REACH``
+steps of ×4 is None: the parameter is not bounded there. So is a side where the model stops being evaluable before
+the data close it (e.g. K so small that the Darcy force overflows): a failure of the model is no evidence against
+the parameter, and bisecting towards it would report the place where the arithmetic broke as a bound the data set.
+Given points ``beyond`` (an interval found already), each side is searched only past its point: where the profile
+closes before it, the point is returned (one refit a side where that is all a caller needs to know). Each profile
+point's refit runs LM as the fits do (``physics_solver``): with LM's defaults it stopped short where K must move far
+from the last point (a pore relaxation doing nothing at its fit on a soft cantilever: M's lower end 6.29e3 Pa for
+3.78e3 converged)."""
 
 from __future__ import annotations
 
@@ -48,10 +47,10 @@ def profile_interval(
     index: torch.Tensor,
     beyond: tuple[float | None, float | None] = (None, None),
     starts: tuple[dict[str, float], ...] = (),
-    noise: StructureTest | None = None,
+    test: StructureTest | None = None,
 ) -> tuple[float | None, float | None]:
     """The 95% interval of the raw parameter ``raw_name`` (a name among the model's free parameters, e.g.
-    'fluid.log_permeability') on ``samples[index]``, in raw units, under ``noise``, the structure test's null
+    'fluid.log_permeability') on ``samples[index]``, in raw units, under ``test``, the structure test's null
     (``_noise_along``; None: κ²); ``raw_std`` its Wald std (the first step). None on a side the data do not close.
     ``beyond``: (low, high) raw points, each side searched past its point only (None, or a point on the other side
     of the fit: the whole side; ±inf: a side open already, not searched); a side closing before it is that point.
@@ -69,7 +68,7 @@ def profile_interval(
     others = [i for i in range(theta.numel()) if i != j]
     warm: dict = {}  # the others at the last profile point and its offset, each side starting from θ̂
     reduced = fit.chi_square / max(fit.samples - theta.numel() + len(extra), 1)
-    scale = _noise_along(residual, theta, j, samples, index, noise) * max(1.0, reduced)
+    scale = _noise_along(residual, theta, j, samples, index, test) * max(1.0, reduced)
 
     def refitted(fixed: torch.Tensor, free: list[int]) -> torch.Tensor:
         """``fixed`` with its entries ``free`` refitted (from their values there)."""
@@ -122,8 +121,8 @@ def profile_interval(
     return sides[0], sides[1]
 
 
-def _noise_along(residual, theta: torch.Tensor, j: int, samples: Samples, index, noise: StructureTest | None) -> float:
-    """What Δχ² is divided by along the profile of θⱼ before it is read against χ²₁: κ² without ``noise``; with
+def _noise_along(residual, theta: torch.Tensor, j: int, samples: Samples, index, test: StructureTest | None) -> float:
+    """What Δχ² is divided by along the profile of θⱼ before it is read against χ²₁: κ² without ``test``; with
     it, the larger of κ² and λ, the noise model's inflation along the shape a move of θⱼ leaves once the others are
     refitted (its Jacobian column less its least-squares projection on theirs: ``StructureTest.inflation_on``),
     times F(1, ν)'s 95% point over χ²₁'s, ν the baseline blocks κ² was read on (Student's t squared: the noise's
@@ -134,7 +133,7 @@ def _noise_along(residual, theta: torch.Tensor, j: int, samples: Samples, index,
     K's shape on a null's base model read λ 10–580 where κ² was 4.9–45 (the memory read off 0.3 µm of baseline
     with it), and K's interval by κ² missed the truth at 7 of 30 seeds, by λ at 2, by λ and F(1, 9.2) at none.
     Where the model cannot be linearised at its optimum, κ²."""
-    if noise is None or noise.tested is None:
+    if test is None or test.tested is None:
         return samples.noise_inflation
     try:
         jacobian, _ = Traced(residual, theta).jacobian_and_value()
@@ -145,8 +144,8 @@ def _noise_along(residual, theta: torch.Tensor, j: int, samples: Samples, index,
         column = column - rest @ torch.linalg.lstsq(rest, column[:, None]).solution[:, 0]
     if not torch.isfinite(column).all():
         return samples.noise_inflation
-    along = noise.inflation_on(index, column.detach().cpu().numpy(), samples.noise_inflation)
-    level = LEVEL if math.isinf(noise.noise_blocks) else fisher_exceeded(0.05, 1, noise.noise_blocks)
+    along = test.inflation_on(index, column.detach().cpu().numpy(), samples.noise_inflation)
+    level = LEVEL if math.isinf(test.noise_blocks) else fisher_exceeded(0.05, 1, test.noise_blocks)
     return max(samples.noise_inflation, along) * level / LEVEL
 
 

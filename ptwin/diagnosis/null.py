@@ -103,7 +103,7 @@ class StructureTest:
         """λ of ``shape`` given on the samples ``index`` (noise units): its part on the tested samples as
         ``inflation_along`` reads it, the rest (samples the test does not simulate: those just before contact) at
         ``elsewhere`` (the set's κ²), each by its share of the shape's squared norm, the two parts' cross terms
-        neglected (the noise's memory reaches across the contact over a few samples at most)."""
+        neglected."""
         samples = index.cpu().numpy()
         at = np.searchsorted(self.tested, samples).clip(max=self.tested.size - 1)
         on = self.tested[at] == samples
