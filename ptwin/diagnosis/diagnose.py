@@ -348,6 +348,14 @@ class FirstFits:
     candidates: dict[tuple[str, ...], Candidate]  # the base model and each single term, fitted under it
 
 
+def judged_test(
+    samples: Samples, split: Split, reference: ReferenceCurve | None, noise: NoiseModel, s: DiagnosisSettings
+) -> StructureTest:
+    """The structure test's null on the samples a diagnosis judges (``Split.judged``), under ``noise`` and the
+    settings' block and false-alarm rate (``reference``: the elastic law, whose noise every residual shares)."""
+    return structure_test(samples, split.judged(samples), reference, noise, s.block, s.false_alarm)
+
+
 def first_fits(
     make_model: Callable,
     samples: Samples,
@@ -365,7 +373,7 @@ def first_fits(
     anything (``pipeline.run`` caps the noise's correlation by their residuals) and hand to it, so that nothing
     is computed twice."""
     s = settings
-    test = structure_test(samples, split.judged(samples), reference, noise, s.block, s.false_alarm)
+    test = judged_test(samples, split, reference, noise, s)
     progress("diagnosis: fitting the base model and each candidate term alone (K refitted with each)")
     terms = min(1, s.max_terms)
     candidates = fit_candidates(make_model, samples, split, s.terms, terms, iterations, s.block, test, progress, fitted)

@@ -46,8 +46,7 @@ import scipy.linalg
 import torch
 
 from ptwin.data.recordings import write_recordings
-from ptwin.diagnosis.diagnose import parameter_interval
-from ptwin.diagnosis.null import structure_test
+from ptwin.diagnosis.diagnose import judged_test, parameter_interval
 from ptwin.diagnosis.words import bounded, number, permeability_words
 from ptwin.fitting.lm import FitError
 from ptwin.fitting.physics_fit import PhysicsFit, fit_with_starts
@@ -679,10 +678,7 @@ def native_strength(
     if not fit.physical:
         return Own(strength, None, absent)
     # the structure test on the term fitted alone is the diagnosis's (``Trial.alone_misses_data``)
-    s = settings.diagnosis
-    test = structure_test(
-        samples, prepared.split.judged(samples), prepared.make_model.reference, prepared.noise, s.block, s.false_alarm
-    )
+    test = judged_test(samples, prepared.split, prepared.make_model.reference, prepared.noise, settings.diagnosis)
     interval = parameter_interval(fit, term, strength, samples, train, test)
     return Own(strength, fit.params[term][strength], absent, interval, as_recorded.alone_misses_data)
 
