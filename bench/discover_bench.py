@@ -315,14 +315,14 @@ def run_seeds(overrides: list[str], scratch: Path, count: int) -> None:
             outcome[label] = " + ".join(f"{e['term']} ({e['confidence']})" for e in d["left_out"]) or "-"
             if d["unexplained"]:
                 outcome[label] += " unexplained"
-            covered[label] += within(d["permeability"]["corrected_interval"], experiment.permeability)
+            covered[label] += holds(d["permeability"]["corrected_interval"], experiment.permeability)
             if label == "null":
                 alarms += d["mismatch"]["detected"] or bool(d["left_out"])
                 inflations.append(d["noise"]["inflation"])
             else:
                 terms = {e["term"]: e["confidence"] for e in d["left_out"]}
                 named += term in terms
-                held += any(e["term"] == term and within(e["param_interval"][strength], value) for e in d["left_out"])
+                held += any(e["term"] == term and holds(e["param_interval"][strength], value) for e in d["left_out"])
                 strong += terms.get(term) == "strong"
                 other += bool(set(terms) - {term})
                 nothing += not terms
@@ -342,7 +342,7 @@ def run_seeds(overrides: list[str], scratch: Path, count: int) -> None:
     )
 
 
-def within(interval: list[float | None], truth: float) -> bool:
+def holds(interval: list[float | None], truth: float) -> bool:
     """Whether a reported interval (None: a side open) holds ``truth``."""
     low, high = interval
     return (low is None or low <= truth) and (high is None or truth <= high)
