@@ -22,8 +22,11 @@ Four suites of its own, each a table, then the shared development sets (``bench/
 Beside them, not in ``all`` (``--suite seeds``, ~60 diagnoses): the false-alarm rate and the detection rate
 over seeds, on nulls and on sets with a pore relaxation in the bench-sets' p01/p07 setting (their AR(1) noise
 with a white floor, 0.3 µm of baseline, the noise std in meta.yaml), with the block inflation each null's
-diagnosis used beside the one the noise was drawn with. ``--seed N`` draws the four suites' noise from another
-seed (0 gives the tables of record): the same families as other recordings of them would be.
+diagnosis used beside the one the noise was drawn with. ``--suite real-noise`` (not in ``all``, ~90 diagnoses, the
+public curves of ``$PTWIN_OPEN_DATA`` read): the same rates with real recorded noise in place of the simulator's
+(``bench/real_noise.py``), on nulls in the soft-cantilever setting and on nulls and pore sets in p07's.
+``--seed N`` draws the four suites' noise from another seed (0 gives the tables of record): the same families as
+other recordings of them would be.
 
 A case is right when the named terms are the concealed ones (nulls: none; the outside
 effect: unexplained) with K within 5%; or, honestly, when nothing is claimed beyond weak
@@ -49,6 +52,7 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 
 from bench.bench_sets import print_sets, run_perturbed, run_sets
+from bench.real_noise import noise_records, with_real_noise
 from ptwin.app import register, typed
 from ptwin.data.noise import model_inflation
 from ptwin.data.recordings import write_recordings
@@ -284,11 +288,12 @@ def print_table(title: str, rows: list[tuple]) -> None:
 
 
 def diagnose(
-    experiment: Experiment, folder: Path, overrides: list[str], noise_in_meta: bool = False
+    experiment: Experiment, folder: Path, overrides: list[str], noise_in_meta: bool = False, recordings=None
 ) -> tuple[dict, float]:
-    """The diagnosis of ``experiment``'s set, written into ``folder`` (``noise_in_meta``: with its noise std in
-    meta.yaml, as a lab that measured it writes it), and the seconds it took."""
-    meta, curves = simulate(experiment)
+    """The diagnosis of ``experiment``'s set (or of ``recordings``, its (meta, curves) made otherwise), written into
+    ``folder`` (``noise_in_meta``: with its noise std in meta.yaml, as a lab that measured it writes it), and the
+    seconds it took."""
+    meta, curves = simulate(experiment) if recordings is None else recordings
     write_recordings(folder, replace(meta, noise_std=experiment.noise_std) if noise_in_meta else meta, curves)
     with initialize_config_dir(config_dir=str(ROOT / "configs"), version_base="1.3"):
         cfg = compose(config_name="train", overrides=[f"data.path={folder}", *overrides])
@@ -312,9 +317,7 @@ def run_seeds(overrides: list[str], scratch: Path, count: int) -> None:
         for label, effects in (("null", {}), ("term", SEEDED_TERM)):
             experiment = Experiment(seed=seed, effects=effects, **SEEDED)
             d, _ = diagnose(experiment, scratch / f"{label}{seed}", overrides, noise_in_meta=True)
-            outcome[label] = " + ".join(f"{e['term']} ({e['confidence']})" for e in d["left_out"]) or "-"
-            if d["unexplained"]:
-                outcome[label] += " unexplained"
+            outcome[label] = said(d)
             covered[label] += holds(d["permeability"]["corrected_interval"], experiment.permeability)
             if label == "null":
                 alarms += d["mismatch"]["detected"] or bool(d["left_out"])
@@ -340,6 +343,50 @@ def run_seeds(overrides: list[str], scratch: Path, count: int) -> None:
         f"block inflation the nulls' diagnoses used: median {middle:.1f} (5–95%: {low:.1f}–{high:.1f}), "
         f"against {truth:.1f} of the noise drawn"
     )
+
+
+REAL_NOISE = {  # setting: (its experiment, the terms concealed beside the nulls, the noise std in meta.yaml)
+    "soft cantilever": (SOFT, {}, False),
+    "p07's, 0.3 µm of baseline": (SEEDED, SEEDED_TERM, True),
+}
+
+
+def run_real_noise(overrides: list[str], scratch: Path, count: int) -> None:
+    """``count`` nulls in each ``REAL_NOISE`` setting (and as many sets with its term, where it has one), the noise
+    of each a window of real pre-contact records (``bench.real_noise``), the materials in turn: how often real noise
+    is taken for a term or for unexplained structure, material by material, and how often the term is named."""
+    records = noise_records()
+    if records is None:
+        return
+    for label, (setting, effects, noise_in_meta) in REAL_NOISE.items():
+        beside = f" and {count} sets with {effects}" if effects else ""
+        print(f"\nreal noise, {label} setting: {count} nulls{beside}")
+        alarms, named = {m: [] for m in records}, []
+        for seed in range(count):
+            material = list(records)[seed % len(records)]
+            outcome = []
+            for concealed in ({}, effects) if effects else ({},):
+                experiment = Experiment(seed=seed, effects=concealed, **setting)
+                recordings = with_real_noise(experiment, records[material])
+                folder = scratch / re.sub(r"[^A-Za-z0-9]+", "_", f"{label}{seed}{bool(concealed)}")
+                d, _ = diagnose(experiment, folder, overrides, noise_in_meta, recordings)
+                outcome.append(said(d))
+                if concealed:
+                    named.append(sorted(e["term"] for e in d["left_out"]) == sorted(concealed))
+                else:
+                    alarms[material].append(d["mismatch"]["detected"] or bool(d["left_out"]))
+            term = f" term: {outcome[1]}" if effects else ""
+            print(f"seed {seed:3d} ({material}): null {outcome[0]:<40s}{term}", flush=True)
+        rates = ", ".join(f"{m} {sum(a)}/{len(a)}" for m, a in alarms.items())
+        print(f"false alarms on the nulls (a term named or a mismatch declared): {rates}")
+        if effects:
+            print(f"{' + '.join(effects)} named (alone, any confidence): {sum(named)}/{len(named)}")
+
+
+def said(d: dict) -> str:
+    """What diagnosis ``d`` named, with confidences, and whether it called the rest unexplained, in a few words."""
+    named = " + ".join(f"{e['term']} ({e['confidence']})" for e in d["left_out"]) or "-"
+    return f"{named} unexplained" if d["unexplained"] else named
 
 
 def holds(interval: list[float | None], truth: float) -> bool:
@@ -403,8 +450,9 @@ def print_loop(rows: list[tuple]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--suite", choices=[*SUITES, "bench-sets", "perturbed", "seeds", "all"], default="all")
-    parser.add_argument("--seeds", type=int, default=30, help="sets of each kind in the seeds suite")
+    suites = [*SUITES, "bench-sets", "perturbed", "seeds", "real-noise", "all"]
+    parser.add_argument("--suite", choices=suites, default="all")
+    parser.add_argument("--seeds", type=int, default=30, help="sets of each kind in the seeds and real-noise suites")
     parser.add_argument("--seed", type=int, default=0, help="the noise seed of the four suites' sets (0: the tables)")
     parser.add_argument("--samples", type=int, default=1000, help="samples per curve (where not set by rate or case)")
     parser.add_argument("--pgd", default="default", help="PGD preset")
@@ -453,6 +501,9 @@ def main() -> None:
     if args.suite == "seeds":  # not in "all": ~60 diagnoses
         with tempfile.TemporaryDirectory() as scratch:
             run_seeds([*overrides, "diagnosis.design=false"], Path(scratch), args.seeds)
+    if args.suite == "real-noise":  # not in "all": ~60 diagnoses, and the public curves it reads
+        with tempfile.TemporaryDirectory() as scratch:
+            run_real_noise([*overrides, "diagnosis.design=false"], Path(scratch), args.seeds)
     if args.suite == "perturbed":  # not in "all": a robustness check of ~35 diagnoses
         with tempfile.TemporaryDirectory() as scratch:
             shaken = run_perturbed([*overrides, "diagnosis.design=false"], Path(scratch), args.only)
