@@ -14,6 +14,7 @@ import torch
 
 from ptwin.data.kinematics import CurveKinematics
 from ptwin.data.noise import (
+    BASELINE,
     RESIDUAL,
     NoiseModel,
     corrected,
@@ -328,8 +329,9 @@ def _beyond_short_baselines(prepared: Prepared, least: NoiseModel) -> bool:
     beyond it (real cell noise: κ² 1.0 off 350-sample baselines, 4–9 over the 1350-sample contact, real-noise.md's
     block-mean std 1.2–5.2× white) is only in the contact, where no model explains it and it would be read as
     structure. Baselines as long as the contact saw those scales, and what the residuals show beyond them is the
-    models' miss, not noise."""
-    if rests_on_short_records(prepared.noise) or not math.isfinite(prepared.noise.blocks):
+    models' miss, not noise. Only the baselines' own reading is raised: one off short baselines pooled, or off the
+    twin's residual (itself a reading in contact, below the models' where the twin takes what no term does), stands."""
+    if not prepared.noise.source.endswith(BASELINE) or not math.isfinite(prepared.noise.blocks):
         return False
     baselines = np.median([c.noise.samples for c in prepared.fitted])
     curve, in_contact = prepared.samples.curve.cpu().numpy(), prepared.samples.in_contact.cpu().numpy()
