@@ -14,7 +14,6 @@ import torch
 
 from ptwin.data.kinematics import CurveKinematics
 from ptwin.data.noise import (
-    BASELINE,
     RESIDUAL,
     NoiseModel,
     corrected,
@@ -22,7 +21,6 @@ from ptwin.data.noise import (
     residual_noise,
     rests_on_short_records,
 )
-from ptwin.data.tails import fisher_exceeded
 from ptwin.diagnosis.design import ExperimentDesign
 from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, FirstFits, diagnose, first_fits
 from ptwin.fitting.hybrid import HybridTwin
@@ -60,11 +58,6 @@ FLEXIBLE_DEGREE = 6
 # would be 1.44× the noise's, beyond what the structure test's model error tolerates.
 LOW_STD = 1.2
 CAPPED = "its correlation capped by what a model's residual in contact shows (a line removed per curve)"
-RAISED = (
-    "raised to what every model's residual in contact shows (a line removed per curve): the baselines, shorter than "
-    "the contact, cannot have seen the noise's slow drift"
-)
-RAISE_LEVEL = 0.01  # the baselines' κ² is exceeded by a residual's of noise alone this often, on F(ν_r, ν_b)
 READ_UNDER = "the first fits read under it (no decision on the way to them turns between the two readings)"
 FITTED_UNDER = "the first fits made again under it"
 BASE_RESIDUAL = (
@@ -179,9 +172,7 @@ def diagnose_set(
     hand: before the twin is asked for, so one training aside (``TwinAside``) goes on meanwhile. Where the baselines
     or the twin's residual measured the correlation, a reading above what those fits' residuals show is capped
     (``_capped_by_residuals``): what the twin misses of a term reads as correlation as a baseline's drift does (a
-    pore relaxation with a hold and a creep, white noise: κ² 18.0 off the twin's residual, 1.23 capped); one below
-    what every model's residual shows beyond the baselines' sampling error is raised to it where the baselines are
-    shorter than the contact, and so blind to the noise's slow drift (``_beyond_short_baselines``). A fit's
+    pore relaxation with a hold and a creep, white noise: κ² 18.0 off the twin's residual, 1.23 capped). A fit's
     optimum never reads κ², so the first fits are read under the reading that stands, or made again where a decision
     on the way to them turns between the two (``ptwin.fitting.inflation_range``)."""
     block, base_fit = settings.diagnosis.block, identification.base
@@ -211,10 +202,7 @@ def diagnose_set(
         inflation = stands.noise.inflation
         reread = span.holds(inflation)
         kept = {s: c.fit.under(inflation) for s, c in first.candidates.items() if c.fit is not None} if reread else {}
-        source = "off the hybrid twin's residual"
-        if stands is not read:
-            lower = inflation < read.noise.inflation
-            source = "capped by a model's residual" if lower else "raised to the models' residuals: short baselines"
+        source = "capped by a model's residual" if stands is not read else "off the hybrid twin's residual"
         progress(f"the noise's block inflation is {inflation:.3g} ({source}): {READ_UNDER if reread else FITTED_UNDER}")
         prepared, first = stands, fitted_first(stands, kept)
     return diagnose(
@@ -274,32 +262,14 @@ def _on_base_residual(prepared: Prepared, base_fit: PhysicsFit, block: int) -> P
 
 
 def _capped_by_residuals(prepared: Prepared, first: FirstFits, block: int) -> Prepared | None:
-    """``prepared`` with the correlation its baselines (or the twin's residual) gave read again off what the models'
-    residuals in contact show (``_least_residual_noise``), or None where that reading stands. A residual holds the
-    noise, the elastic law's inherited noise and whatever the model misses, so its block inflation reads the noise's
-    or more: the least over the base model and each usable single term's bounds the noise's from above, on records
-    ten times the baselines' (p07-like sets, four baselines of 160 samples of AR(1) noise of 20-sample memory, 40%
-    white: κ² 5.2–40 from the baselines, 16.7–24 from the residuals, 15.6 the noise's); a reading above it is
-    capped, and a curve's own κ² by its own residual's the same way. The ν blocks the tests rest on stay the
-    baselines'. A reading below it stands unless ``_beyond_short_baselines`` says the baselines cannot have seen it."""
-    read = _least_residual_noise(prepared, first, block)
-    if read is None:
-        return None
-    best, own = read
-    if best.inflation >= prepared.noise.inflation:
-        return _raised(prepared, best) if _beyond_short_baselines(prepared, best) else None
-    noise = replace(prepared.noise, **_correlation(best), source=f"{prepared.noise.source}, {CAPPED}")
-    fitted = [
-        replace(c, noise=replace(c.noise, inflation=min(c.noise.inflation, own.get(c.curve, np.inf))))
-        for c in prepared.fitted
-    ]
-    return _rebuilt(prepared, fitted, noise)
-
-
-def _least_residual_noise(prepared: Prepared, first: FirstFits, block: int) -> tuple[NoiseModel, dict] | None:
-    """(the least correlated reading over the usable first fits' residuals in contact, a line removed per curve
-    (``residual_noise``), {curve: its own least κ² over them}), or None where no residual holds a record long
-    enough."""
+    """``prepared`` with the correlation its baselines (or the twin's residual) gave capped by what a model's residual
+    in contact shows, or None where no residual shows less. A residual holds the noise, the elastic law's inherited
+    noise and whatever the model misses, so its block inflation reads the noise's or more: the least over the base model
+    and each usable single term's (``first``, ``first_fits``; a line removed per curve) bounds the noise's from above,
+    on records ten times the baselines' (p07-like sets, four baselines of 160 samples of AR(1) noise of 20-sample
+    memory, 40% white: κ² 5.2–40 from the baselines, 16.7–24 from the residuals, 15.6 the noise's). A curve's own κ² is
+    capped by its own residual's the same way. κ² is then the lesser of the two readings; the ν blocks the tests rest on
+    stay the baselines'."""
     std, best, residuals = prepared.noise.std, None, []
     for candidate in first.candidates.values():
         if not candidate.usable:
@@ -311,46 +281,28 @@ def _least_residual_noise(prepared: Prepared, first: FirstFits, block: int) -> t
         residuals.append(records)
         if best is None or noise.inflation < best.inflation:
             best = noise
-    if best is None:
+    if best is None or best.inflation >= prepared.noise.inflation:
         return None
-    own = {}
+    own = {}  # each curve's least κ² over the residuals
     for records in residuals:
         for curve_id, record in zip(prepared.samples.curve_ids, records):
             alone = residual_noise([record], std, step, block, 1, CAPPED)
             if alone is not None:
                 own[curve_id] = min(own.get(curve_id, np.inf), alone.inflation)
-    return best, own
-
-
-def _beyond_short_baselines(prepared: Prepared, least: NoiseModel) -> bool:
-    """Whether the least residual reading ``least`` lies beyond what the baselines could have read, where they are
-    shorter than the records in contact: above the baselines' κ² by more than F(ν_residual, ν_baselines)'s
-    1 − ``RAISE_LEVEL`` point. A baseline sees the noise's variance at scales up to its own length; slow drift
-    beyond it (real cell noise: κ² 1.0 off 350-sample baselines, 4–9 over the 1350-sample contact, real-noise.md's
-    block-mean std 1.2–5.2× white) is only in the contact, where no model explains it and it would be read as
-    structure. Baselines as long as the contact saw those scales, and what the residuals show beyond them is the
-    models' miss, not noise. Only the baselines' own reading is raised: one off short baselines pooled, or off the
-    twin's residual (itself a reading in contact, below the models' where the twin takes what no term does), stands."""
-    if not prepared.noise.source.endswith(BASELINE) or not math.isfinite(prepared.noise.blocks):
-        return False
-    baselines = np.median([c.noise.samples for c in prepared.fitted])
-    curve, in_contact = prepared.samples.curve.cpu().numpy(), prepared.samples.in_contact.cpu().numpy()
-    records = np.median(np.bincount(curve[in_contact], minlength=len(prepared.samples.curve_ids)))
-    bound = fisher_exceeded(RAISE_LEVEL, least.blocks, prepared.noise.blocks) * prepared.noise.inflation
-    return baselines < records and least.inflation > bound
-
-
-def _raised(prepared: Prepared, least: NoiseModel) -> Prepared:
-    """``prepared`` under the correlation of the least residual reading ``least`` (``_beyond_short_baselines``); each
-    curve keeps its own κ² where that is larger."""
-    noise = replace(prepared.noise, **_correlation(least), source=f"{prepared.noise.source}, {RAISED}")
-    return _rebuilt(prepared, prepared.fitted, noise)
-
-
-def _correlation(noise: NoiseModel) -> dict:
-    """The fields of ``noise`` that say how its samples correlate."""
-    names = ("share", "memory", "lag1", "inflation", "correlation_time")
-    return {name: getattr(noise, name) for name in names}
+    noise = replace(
+        prepared.noise,
+        share=best.share,
+        memory=best.memory,
+        lag1=best.lag1,
+        inflation=best.inflation,
+        correlation_time=best.correlation_time,
+        source=f"{prepared.noise.source}, {CAPPED}",
+    )
+    fitted = [
+        replace(c, noise=replace(c.noise, inflation=min(c.noise.inflation, own.get(c.curve, np.inf))))
+        for c in prepared.fitted
+    ]
+    return _rebuilt(prepared, fitted, noise)
 
 
 def _rebuilt(prepared: Prepared, fitted: list[CurveKinematics], noise: NoiseModel) -> Prepared:
