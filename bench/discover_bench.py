@@ -288,7 +288,11 @@ def print_table(title: str, rows: list[tuple]) -> None:
 
 
 def diagnose(
-    experiment: Experiment, folder: Path, overrides: list[str], noise_in_meta: bool = False, recordings=None
+    experiment: Experiment,
+    folder: Path,
+    overrides: list[str],
+    noise_in_meta: bool = False,
+    recordings: tuple | None = None,
 ) -> tuple[dict, float]:
     """The diagnosis of ``experiment``'s set (or of ``recordings``, its (meta, curves) made otherwise), written into
     ``folder`` (``noise_in_meta``: with its noise std in meta.yaml, as a lab that measured it writes it), and the
@@ -501,7 +505,7 @@ def main() -> None:
     if args.suite == "seeds":  # not in "all": ~60 diagnoses
         with tempfile.TemporaryDirectory() as scratch:
             run_seeds([*overrides, "diagnosis.design=false"], Path(scratch), args.seeds)
-    if args.suite == "real-noise":  # not in "all": ~60 diagnoses, and the public curves it reads
+    if args.suite == "real-noise":  # not in "all": ~90 diagnoses, and the public curves it reads
         with tempfile.TemporaryDirectory() as scratch:
             run_real_noise([*overrides, "diagnosis.design=false"], Path(scratch), args.seeds)
     if args.suite == "perturbed":  # not in "all": a robustness check of ~35 diagnoses
