@@ -579,7 +579,8 @@ def test_with_no_usable_single_term_pairs_are_fitted_only_if_the_base_model_leav
         (1980.0, False, 3e-16, 900.0, []),
         (1000.0, False, 3e-16, 995.0, [("a", "b"), ("a", "c")]),
         (1000.0, False, 3e-16, 900.0, [("a", "b"), ("a", "c"), ("b", "c")]),
-        (1000.0, True, 3e-16, 900.0, []),
+        (1000.0, True, 3e-16, 995.0, [("a", "b", "grown"), ("a", "c", "grown")]),
+        (1000.0, True, 3e-16, 900.0, [("a", "b", "grown"), ("a", "c", "grown"), ("b", "c")]),
         (1000.0, False, 1e25, 900.0, []),
     ],
 )
@@ -590,9 +591,10 @@ def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_te
     information criterion sees and the whole-residual test cannot prove, so the pairs it may be half of are
     fitted, and only those where none of them beats it by the BIC margin (χ² 995: 1.9 BIC above it); where one
     does (χ² 900: 98 BIC below it), two terms are needed and a may only stand in for one, so b + c is fitted too.
-    At 3 BIC better, as the other two are, nothing is grown; nor where the term is beyond the noise in its own
-    shape (it is named alone), nor where its fit ran K to 1e25 m² (a degenerate parametrisation, such as
-    strain_dependent_permeability makes of one ramp-and-hold curve)."""
+    Where the term is beyond the noise in its own shape (named alone), the pairs are grown from its optimum (the
+    forward step): a term beside it that no test proves still moves K, which K's interval must reach. At 3 BIC
+    better, as the other two are, nothing is grown; nor where its fit ran K to 1e25 m² (a degenerate
+    parametrisation, such as strain_dependent_permeability makes of one ramp-and-hold curve)."""
     import ptwin.diagnosis.name as name
     from ptwin.diagnosis.null import TermEvidence
 
@@ -611,13 +613,20 @@ def test_with_the_base_model_within_the_noise_pairs_are_fitted_where_a_single_te
         fit.model = lambda samples: samples.force + len(subset)
         return fit
 
+    def fit_from(make_model, subset, start, samples, index, iterations, reference_free, grown=False):
+        assert start.terms == ("a",) and grown  # one fit, from the best single's optimum
+        fit = fit_with_starts(make_model, subset, samples, index, iterations)
+        fitted[-1] = (*subset, "grown")
+        return fit
+
     monkeypatch.setattr(name, "fit_with_starts", fit_with_starts)
+    monkeypatch.setattr(name, "fit_from", fit_from)
     monkeypatch.setattr(name, "pooled_whiteness", lambda samples, residual, index, block: 2.0)
     samples, split = ten_samples()
     name.fit_candidates(
         None, samples, split, ["a", "b", "c"], 2, 1, 50, ABOVE_FIVE, lambda line: None, None, bic_margin=10.0
     )
-    assert [t for t in fitted if len(t) == 2] == pairs
+    assert [t for t in fitted if len(t) > 1] == pairs
 
 
 def test_a_pair_is_named_by_its_own_shape_only_where_no_single_term_is():
