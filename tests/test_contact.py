@@ -95,6 +95,22 @@ def test_levels_are_kept_as_drag_only_where_they_rise_with_speed_beyond_free_off
     assert np.mean([fit.shows_drag for fit in drags]) >= 0.97
 
 
+def test_levels_whose_errors_are_read_off_short_baselines_are_judged_on_f_not_on_chi_square():
+    # One level plus drag (4 speeds), each level's error read off its own baseline, 7.4 effectively independent
+    # samples of it (the bench-sets' p08 setting): a level over its error has Student's tails, and χ²(2)'s 99%
+    # point rejected 2.8% of 4000 such sets; F(2, 7.4)'s rejects at most the stated 1%. Errors known: χ².
+    speeds = np.array([1.0, 4.0, 16.0, 64.0]) * 1e-6
+    rng = np.random.default_rng(5)
+    blocks = 7.4
+    rejected = {math.inf: 0, blocks: 0}
+    for _ in range(4000):
+        stds = 2e-10 * np.sqrt(rng.chisquare(blocks, 4) / blocks)
+        levels = 3e-10 + 1e-4 * speeds + 2e-10 * rng.standard_normal(4)
+        for read_on in rejected:
+            rejected[read_on] += not levels_with_speed(levels, stds, speeds, read_on).consistent
+    assert rejected[math.inf] / 4000 > 0.02 and rejected[blocks] / 4000 <= 0.01
+
+
 def test_the_onset_read_with_a_root_depth_force_places_the_contact_that_hertz_alone_takes_for_earlier():
     # A solid viscosity (π·γ·U·√(ρw), 5 Pa·s at 15 µm/s) grows from contact as √w, the first-order shape of a
     # contact shift: the Hertz onset puts this contact 25 nm early (26 ± 1 nm over twelve draws). Read as Hertz

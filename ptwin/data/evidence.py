@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ptwin.data.contact import REJECT, levels_with_speed
+from ptwin.data.contact import REJECT, baseline_levels
 from ptwin.data.kinematics import CurveKinematics
 from ptwin.data.recordings import APPROACH
 
@@ -72,8 +72,7 @@ def drag_from_baselines(curves: list[CurveKinematics]) -> str | None:
     if not removed:
         return None
     baselines = [c.baseline for c in removed]
-    levels, stds = np.array([b.level for b in baselines]), np.array([b.level_std for b in baselines])
-    fit = levels_with_speed(levels, stds, np.array([c.base_speed for c in removed]))
+    fit = baseline_levels(baselines, [c.base_speed for c in removed])
     listing = ", ".join(
         f"{c.curve} {c.baseline.level * 1e9:.3g} ± {c.baseline.level_std * 1e9:.2g} nN" for c in removed
     )
@@ -97,7 +96,8 @@ def drag_from_baselines(curves: list[CurveKinematics]) -> str | None:
         )
     return (
         f"Baseline levels {listing} differ by more than one common level plus drag explains (χ² {fit.chi_square:.0f} "
-        f"on {fit.dof} degrees of freedom): each curve's own level is removed, drag with it."
+        f"on {fit.dof} degrees of freedom, beyond the {fit.bound:.3g} such levels exceed one time in {1 / REJECT:.0f}, "
+        "their errors read off their baselines): each curve's own level is removed, drag with it."
     )
 
 

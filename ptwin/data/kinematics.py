@@ -39,7 +39,7 @@ import numpy as np
 import pandas as pd
 from numpy.lib.stride_tricks import sliding_window_view
 
-from ptwin.data.contact import Baseline, NoBaseline, estimate_baseline, levels_with_speed
+from ptwin.data.contact import Baseline, NoBaseline, baseline_levels, estimate_baseline
 from ptwin.data.noise import NoiseModel, curve_noise, robust_std, with_std
 from ptwin.data.recordings import APPROACH, RETRACT, SEGMENTS, RecordingError, RecordingSet
 from ptwin.data.tails import normal_exceeded
@@ -244,9 +244,7 @@ def _estimated_baselines(recordings: RecordingSet, rows: dict[str, pd.DataFrame]
         z, force = (curve[c].to_numpy(dtype=np.float64)[approach] for c in ("z", "force"))
         baselines[curve_id] = _estimated_baseline(recordings, curve_id, z, force)
         speeds.append(float(curve["base_speed"].to_numpy()[approach][0]))
-    levels = np.array([b.level for b in baselines.values()])
-    stds = np.array([b.level_std for b in baselines.values()])
-    fit = levels_with_speed(levels, stds, np.array(speeds))
+    fit = baseline_levels(list(baselines.values()), speeds)
     if fit is None or not fit.shows_drag:
         return baselines
     return {curve_id: b.with_offset(fit.common) for curve_id, b in baselines.items()}
