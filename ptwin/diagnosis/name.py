@@ -178,7 +178,7 @@ def _to_fit(
     if size == 1 or best is None or best.leaves_structure(test) or within is None:
         return subsets, None
     preferred, forward = preferred_subsets(candidates, size - 1, bic_margin), None
-    if not within or any(e.beyond for e in shape_evidence(candidates, test).values()):
+    if not within or (preferred and any(e.beyond for e in shape_evidence(candidates, test).values())):
         forward = best if best.terms in preferred else None
         preferred = [best.terms] if forward else []
     return [subset for subset in subsets if any(set(p) <= set(subset) for p in preferred)], forward
