@@ -101,14 +101,14 @@ def test_levels_whose_errors_are_read_off_short_baselines_are_judged_on_f_not_on
     # point rejected 2.8% of 4000 such sets; F(2, 7.4)'s rejects at most the stated 1%. Errors known: χ².
     speeds = np.array([1.0, 4.0, 16.0, 64.0]) * 1e-6
     rng = np.random.default_rng(5)
-    blocks = 7.4
-    rejected = {math.inf: 0, blocks: 0}
+    error_dof = 7.4
+    rejected = {math.inf: 0, error_dof: 0}
     for _ in range(4000):
-        stds = 2e-10 * np.sqrt(rng.chisquare(blocks, 4) / blocks)
+        stds = 2e-10 * np.sqrt(rng.chisquare(error_dof, 4) / error_dof)
         levels = 3e-10 + 1e-4 * speeds + 2e-10 * rng.standard_normal(4)
         for read_on in rejected:
             rejected[read_on] += not levels_with_speed(levels, stds, speeds, read_on).consistent
-    assert rejected[math.inf] / 4000 > 0.02 and rejected[blocks] / 4000 <= 0.01
+    assert rejected[math.inf] / 4000 > 0.02 and rejected[error_dof] / 4000 <= 0.01
 
 
 def test_the_onset_read_with_a_root_depth_force_places_the_contact_that_hertz_alone_takes_for_earlier():
