@@ -123,6 +123,24 @@ def test_a_profile_flattening_out_just_below_the_level_is_open_and_a_steepening_
     assert len(points) <= 2 * intervals.ITERATIONS
 
 
+def test_a_bracket_s_outer_point_read_inside_on_a_nearer_refit_is_searched_past():
+    # A profile point is a refit, warm from the last point: one that jumps far (here over half again the last
+    # offset) can stop short of its minimum and read closed where, refitted from nearby, it is inside. A profile
+    # flattening out towards its end at 1.5 reads its second point (0.87) so; regula falsi then crowded against it
+    # and ended there (a soft cantilever's K: 5.78e-16 m² for the 5.83e-16 where its profile closes).
+    def profile(x):
+        return math.sqrt(LEVEL) * (math.sqrt(x / 1.5) - 1.0)
+
+    last = [0.0]
+
+    def excess(offset):
+        jumped, last[0] = last[0] > 0 and offset > 1.5 * last[0], offset
+        return max(profile(offset), 0.3) if jumped else profile(offset)
+
+    assert intervals._side(profile, 0.5) == pytest.approx(1.5, rel=5e-3)
+    assert intervals._side(excess, 0.5) == pytest.approx(1.5, rel=5e-3)
+
+
 def test_a_side_searched_past_a_point_ends_where_the_whole_profile_ends_or_at_that_point():
     # A model screened against an interval found already (``beyond``): where its profile reaches further, the side is
     # the whole profile's; where it closes before the point, the point (one refit); an open side is not searched.
