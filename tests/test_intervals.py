@@ -2,6 +2,7 @@
 
 import math
 
+import numpy as np
 import pytest
 import torch
 from torch import nn
@@ -87,6 +88,51 @@ def test_a_smooth_parameter_s_interval_reads_the_noise_along_its_own_shape_not_t
     reduced = max(1.0, fit.chi_square / (len(samples) - 2))
     assert along > 2.0 * samples.noise_inflation
     assert (high - low) / 2 == pytest.approx(math.sqrt(LEVEL * along * reduced / (shape @ shape).item()), rel=0.1)
+
+
+def test_the_noise_along_a_shape_by_the_recursive_filter_is_the_dense_quadratic_form():
+    # Two curves, samples skipped (a split's), white + AR(1): sᵀRs/sᵀs against R built whole.
+    from ptwin.data.noise import NoiseModel
+
+    generator = torch.Generator().manual_seed(2)
+    positions = torch.sort(torch.randperm(300, generator=generator)[:200]).values.numpy()
+    curve = (positions >= 140).astype(int)
+    shape = torch.randn(200, generator=generator, dtype=torch.float64).numpy()
+    noise = NoiseModel(1.0, 0.36, 1.0, 0.0, "test", 300, share=0.4, memory=0.9)
+    gaps = abs(positions[:, None] - positions[None, :])
+    dense = 0.6 * (gaps == 0) + 0.4 * 0.9**gaps * (curve[:, None] == curve[None, :])
+    assert intervals._correlated(shape, positions, curve, noise) == pytest.approx(
+        shape @ dense @ shape / (shape @ shape), rel=1e-12
+    )
+    assert intervals._span(noise) == pytest.approx(0.6 + 0.4 * 1.9 / 0.1)
+
+
+def test_a_correlation_longer_than_the_baselines_show_is_read_off_the_fit_s_residual():
+    # The baselines read the noise white (the structure test's model), but the residual carries AR(1) noise of
+    # 100-sample memory, as drifting cell noise does beyond a short baseline: the slope's shape sums it λ = 185
+    # times white noise's (exact). Read off the baselines alone the interval was 0.08 of the width the noise gives
+    # it; with the residual's correlation read too (c 1.0, φ 0.991 off the one record, times F(1, 18.7) for its
+    # independent samples) 1.11.
+    from ptwin.data.noise import NoiseModel, autoregressive
+    from ptwin.diagnosis.null import structure_test
+
+    n, memory = 4000, math.exp(-1.0 / 100.0)
+    samples = line_samples(n=n)
+    generator = torch.Generator().manual_seed(5)
+    innovations = torch.randn(n, generator=generator, dtype=torch.float64).numpy()
+    drift = autoregressive(innovations, memory, math.sqrt(1.0 - memory**2), 0.0)
+    samples.force = 2.0 + 3.0 * samples.time + 0.1 * torch.from_numpy(drift)
+    fit, index = fitted_line(samples)
+    white = NoiseModel(0.1, 0.0, 1.0, 0.0, "white", n)
+    test = structure_test(samples, index, None, white, 50, 0.01)
+    low, high = profile_interval(fit, "b", textbook_std(samples, fit), samples, index, test=test)
+    shape = ((samples.time - samples.time.mean()) / 0.1).numpy()
+    sums = np.correlate(shape, shape, "full")[n - 1 :]  # Σ_t s_t s_(t+k), k = 0 … n − 1
+    along = (sums[0] + 2.0 * sums[1:] @ memory ** np.arange(1, n)) / sums[0]
+    reduced = max(1.0, fit.chi_square / (n - 2))
+    truth = math.sqrt(LEVEL * along * reduced / sums[0])
+    assert along > 100.0
+    assert (high - low) / 2 == pytest.approx(truth, rel=0.35)
 
 
 @pytest.mark.parametrize("first, refits", [(0.5, 4), (2.0, 6)])

@@ -3,8 +3,8 @@
 For one parameter of a fitted model the profile χ²_p(θ) is the least χ² with θ fixed and every other parameter
 refitted (a contact correction the fit holds too, within its range: ``held_range``). Under correlated noise the
 likelihood-ratio statistic is Δχ²/κ² (κ²: the noise model's block-variance inflation; given the structure test's
-null, the noise model's inflation along the parameter's own profile shape where that is larger, read against F(1,
-ν): ``_noise_along``), also divided by the reduced χ² of the fit where that exceeds 1 (the misfit is then larger
+null, the noise model's inflation along the parameter's own profile shape, or the inflation along it that the fit's
+own residual in contact shows, where either is larger, read against F(1, ν): ``_noise_along``), also divided by the reduced χ² of the fit where that exceeds 1 (the misfit is then larger
 than the noise model says, as the Wald variance assumes too), and the interval is where it stays ≤ 3.84 (χ² with one
 degree of freedom). Each side is found on the raw parameter (log K, log M, log tau: asymmetric intervals where the
 data are) by regula falsi (Illinois) on √Δ − √3.84, which is nearly linear in θ, from the Wald step outward (each
@@ -23,12 +23,21 @@ from __future__ import annotations
 import itertools
 import math
 
+import numpy as np
 import torch
 
+from ptwin.data.noise import NoiseModel, autoregressive, residual_noise
 from ptwin.data.tails import fisher_exceeded
 from ptwin.diagnosis.null import StructureTest
 from ptwin.fitting.lm import FitError, Traced
-from ptwin.fitting.physics_fit import SETTLED, PhysicsFit, held_range, physics_solver, scaled_residual
+from ptwin.fitting.physics_fit import (
+    SETTLED,
+    PhysicsFit,
+    fitted_difference,
+    held_range,
+    physics_solver,
+    scaled_residual,
+)
 from ptwin.physics.samples import Samples
 
 LEVEL = 3.841458820694124  # the 95% point of χ² with one degree of freedom
@@ -37,6 +46,7 @@ ITERATIONS = 8  # regula falsi steps per side
 RESTARTS = 2  # searches on past a bracket's outer point that a refit nearer to it reads inside (``_side``)
 TOLERANCE = 0.01 * math.sqrt(LEVEL)  # |excess| that counts as on the side
 PAST = 0.1 * TOLERANCE  # the excess an outward point aims at: just past the level, where it ends the side
+READ_LAGS = 300  # lags of the fit's residual in contact whose correlation a profile reads too (``_noise_along``)
 REFIT = 40  # LM iterations of the other parameters at each profile point (as the fits run LM: ``physics_solver``)
 
 
@@ -69,7 +79,7 @@ def profile_interval(
     others = [i for i in range(theta.numel()) if i != j]
     warm: dict = {}  # the others at the last profile point and its offset, each side starting from θ̂
     reduced = fit.chi_square / max(fit.samples - theta.numel() + len(extra), 1)
-    scale = _noise_along(residual, theta, j, samples, index, test) * max(1.0, reduced)
+    scale = _noise_along(residual, theta, j, samples, index, test, fit) * max(1.0, reduced)
 
     def refitted(fixed: torch.Tensor, free: list[int]) -> torch.Tensor:
         """``fixed`` with its entries ``free`` refitted (from their values there)."""
@@ -122,32 +132,92 @@ def profile_interval(
     return sides[0], sides[1]
 
 
-def _noise_along(residual, theta: torch.Tensor, j: int, samples: Samples, index, test: StructureTest | None) -> float:
-    """What Δχ² is divided by along the profile of θⱼ before it is read against χ²₁: κ² without ``test``; with
-    it, the larger of κ² and λ, the noise model's inflation along the shape a move of θⱼ leaves once the others are
-    refitted (its Jacobian column less its least-squares projection on theirs: ``StructureTest.inflation_on``),
-    times F(1, ν)'s 95% point over χ²₁'s, ν the baseline blocks κ² was read on (Student's t squared: the noise's
-    own scale is estimated), as the term-shape test reads a gain (``null.term_evidence``).
+def _noise_along(
+    residual,
+    theta: torch.Tensor,
+    j: int,
+    samples: Samples,
+    index,
+    test: StructureTest | None,
+    fit: PhysicsFit | None = None,
+) -> float:
+    """What Δχ² is divided by along the profile of θⱼ before it is read against χ²₁: the largest of κ², λ and λ'
+    along the shape a move of θⱼ leaves once the others are refitted (its Jacobian column less its least-squares
+    projection on theirs), each times F(1, ν)'s 95% point over χ²₁'s, ν the independent samples its noise was
+    read on (Student's t squared: the noise's own scale is estimated), as the term-shape test reads a gain
+    (``null.term_evidence``). λ: the structure test's noise model, read off the baselines (``StructureTest
+    .inflation_on``), ν its blocks. λ': the correlation of ``fit``'s own residual in contact
+    (``_residual_correlation``), ν its samples over the span of one independent one (``_span``). Without ``test``
+    (no noise model to judge by), κ² alone.
 
     κ² is the variance of block means over white noise's, and a smooth shape sums the noise over far more than
     a block: under the bench-sets' p07 noise (AR(1) of 20-sample memory, 40% white, κ² 15.6 at 50-sample blocks)
     K's shape on a null's base model read λ 10–580 where κ² was 4.9–45 (the memory read off 0.3 µm of baseline
     with it), and K's interval by κ² missed the truth at 7 of 30 seeds, by λ at 2, by λ and F(1, 9.2) at none.
-    Where the model cannot be linearised at its optimum, κ²."""
+    A baseline shows no correlation longer than itself: under the cells' drifting noise ×15 in the p06 setting
+    (baselines of 330 samples, 1000 in contact) K's shape read λ 1.2–2.3 off the baselines and 15–69 off the
+    named model's residual, and K's interval missed the truth at 7 of 18 relaxation sets, its error 4.6% rms
+    where its Wald std, by the baselines, was about 1%. Where the model cannot be linearised at its optimum, κ²."""
+    modelled = samples.noise_inflation
     if test is None or test.tested is None:
-        return samples.noise_inflation
+        return modelled
     try:
         jacobian, _ = Traced(residual, theta).jacobian_and_value()
     except (ValueError, RuntimeError):
-        return samples.noise_inflation
+        return modelled
     column, rest = jacobian[:, j], torch.cat([jacobian[:, :j], jacobian[:, j + 1 :]], dim=1)
     if rest.shape[1]:
         column = column - rest @ torch.linalg.lstsq(rest, column[:, None]).solution[:, 0]
     if not torch.isfinite(column).all():
-        return samples.noise_inflation
-    along = test.inflation_on(index, column.detach().cpu().numpy(), samples.noise_inflation)
-    level = LEVEL if math.isinf(test.noise_blocks) else fisher_exceeded(0.05, 1, test.noise_blocks)
-    return max(samples.noise_inflation, along) * level / LEVEL
+        return modelled
+    shape = column.detach().cpu().numpy()
+    modelled = max(modelled, test.inflation_on(index, shape, samples.noise_inflation)) * _student(test.noise_blocks)
+    read = None if fit is None else _residual_correlation(fit, samples, index)
+    if read is None:
+        return modelled
+    positions, curve = index.cpu().numpy(), samples.curve[index].cpu().numpy()
+    return max(modelled, _correlated(shape, positions, curve, read) * _student(read.samples / _span(read)))
+
+
+def _student(blocks: float) -> float:
+    """F(1, ν)'s 95% point over χ²₁'s: a variance read off ν independent blocks."""
+    return 1.0 if math.isinf(blocks) else fisher_exceeded(0.05, 1, blocks) / LEVEL
+
+
+def _span(noise: NoiseModel) -> float:
+    """How many samples one independent sample's worth of ``noise`` spans (≥ 1): the variance of a long mean
+    over white noise's, (1 − c) + c(1 + φ)/(1 − φ) for white + AR(1) of share c and memory φ."""
+    share, memory = noise.share, noise.memory
+    return max(1.0, (1.0 - share) + share * (1.0 + memory) / (1.0 - memory))
+
+
+def _residual_correlation(fit: PhysicsFit, samples: Samples, index: torch.Tensor) -> NoiseModel | None:
+    """The correlation (white + AR(1), ``residual_noise``) of ``fit``'s residual in contact in noise units, each
+    curve's a record less its line, read at lags up to ``READ_LAGS``; None where no curve holds 100 samples in
+    contact. A residual holds the noise and what the model misses, so this reads the noise's correlation or more;
+    the structure test, which names what a model misses, never reads it."""
+    with torch.no_grad():
+        scaled = (fitted_difference(fit.model, samples, index) / samples.noise_floor).cpu().numpy()
+    curve, in_contact = samples.curve.cpu().numpy(), samples.in_contact.cpu().numpy()
+    records = [scaled[(curve == i) & in_contact] for i in range(len(samples.curve_ids))]
+    return residual_noise(records, 1.0, 1.0, READ_LAGS, 1, "the fit's residual in contact")
+
+
+def _correlated(shape: np.ndarray, positions: np.ndarray, curve: np.ndarray, noise: NoiseModel) -> float:
+    """λ' = sᵀRs / sᵀs of ``shape`` s on the samples at ``positions`` (sample numbers; R within each ``curve``:
+    ρ(k) = c·φ^|k| of ``noise``'s share c and memory φ beside its white part), by a recursive filter along each
+    curve's samples (zeros where ``positions`` skip one)."""
+    norm = float(shape @ shape)
+    if norm <= 0.0 or noise.share == 0.0 or noise.memory <= 0.0:
+        return 1.0
+    lagged = 0.0  # Σ_{i<k} s_i s_k φ^(k − i) over each curve
+    for c in np.unique(curve):
+        on = curve == c
+        full = np.zeros(positions[on].max() - positions[on].min() + 1)
+        full[positions[on] - positions[on].min()] = shape[on]
+        carried = autoregressive(full, noise.memory)
+        lagged += float(full @ carried) - float(full @ full)
+    return (1.0 - noise.share) + noise.share * (norm + 2.0 * lagged) / norm
 
 
 def _lowest(settle, starts: list[torch.Tensor]) -> tuple[torch.Tensor, float] | None:
