@@ -1,21 +1,21 @@
 """95% intervals that hold under the noise model: profile likelihood.
 
-For one parameter of a fitted model the profile χ²_p(θ) is the least χ² with θ fixed and every other parameter
-refitted (a contact correction the fit holds too, within its range: ``held_range``). Under correlated noise the
-likelihood-ratio statistic is Δχ²/κ² (κ²: the noise model's block-variance inflation; given the structure test's
-null, the noise model's inflation along the parameter's own profile shape, or the inflation along it that the fit's
-own residual in contact shows, where either is larger, read against F(1, ν): ``_noise_along``), also divided by the
-reduced χ² of the fit where that exceeds 1 (the misfit is then larger than the noise model says, as the Wald variance
-assumes too), and the interval is where it stays ≤ 3.84 (χ² with one degree of freedom). Each side is found on the raw parameter (log K, log M, log tau: asymmetric intervals where the
-data are) by regula falsi (Illinois) on √Δ − √3.84, which is nearly linear in θ, from the Wald step outward (each
-outward point where the line through the last two meets the level). A side the data do not close within ``REACH``
-steps of ×4 is None: the parameter is not bounded there. So is a side where the model stops being evaluable before
-the data close it (e.g. K so small that the Darcy force overflows): a failure of the model is no evidence against
-the parameter, and bisecting towards it would report the place where the arithmetic broke as a bound the data set.
-Given points ``beyond`` (an interval found already), each side is searched only past its point: where the profile
-closes before it, the point is returned (one refit a side where that is all a caller needs to know). Each profile
-point's refit runs LM as the fits do (``physics_solver``): with LM's defaults it stopped short where K must move far
-from the last point (a pore relaxation doing nothing at its fit on a soft cantilever: M's lower end 6.29e3 Pa for
+For one parameter of a fitted model the profile χ²_p(θ) is the least χ² with θ fixed and every other parameter refitted
+(a contact correction the fit holds too, within its range: ``held_range``). Under correlated noise the likelihood-ratio
+statistic is Δχ²/κ² (κ²: the noise model's block-variance inflation; given the structure test's null, the noise model's
+inflation along the parameter's own profile shape, or the inflation along it that the fit's own residual in contact
+shows, where either is larger, read against F(1, ν): ``_noise_along``), also divided by the reduced χ² of the fit where
+that exceeds 1 (the misfit is then larger than the noise model says, as the Wald variance assumes too), and the interval
+is where it stays ≤ 3.84 (χ² with one degree of freedom). Each side is found on the raw parameter (log K, log M, log
+tau: asymmetric intervals where the data are) by regula falsi (Illinois) on √Δ − √3.84, which is nearly linear in θ,
+from the Wald step outward (each outward point where the line through the last two meets the level). A side the data do
+not close within ``REACH`` steps of ×4 is None: the parameter is not bounded there. So is a side where the model stops
+being evaluable before the data close it (e.g. K so small that the Darcy force overflows): a failure of the model is no
+evidence against the parameter, and bisecting towards it would report the place where the arithmetic broke as a bound
+the data set. Given points ``beyond`` (an interval found already), each side is searched only past its point: where the
+profile closes before it, the point is returned (one refit a side where that is all a caller needs to know). Each
+profile point's refit runs LM as the fits do (``physics_solver``): with LM's defaults it stopped short where K must move
+far from the last point (a pore relaxation doing nothing at its fit on a soft cantilever: M's lower end 6.29e3 Pa for
 3.78e3 converged)."""
 
 from __future__ import annotations
@@ -157,7 +157,8 @@ def _noise_along(
     A baseline shows no correlation longer than itself: under the cells' drifting noise ×15 in the p06 setting
     (baselines of 330 samples, 1000 in contact) K's shape read λ 1.2–2.3 off the baselines and 15–69 off the
     named model's residual, and K's interval missed the truth at 7 of 18 relaxation sets (at none with λ'), its
-    error 4.6% rms where its Wald std, by the baselines, was about 1%. Where the model cannot be linearised at its optimum, κ²."""
+    error 4.6% rms where its Wald std, by the baselines, was about 1%. Where the model cannot be linearised at its
+    optimum, κ²."""
     modelled = samples.noise_inflation
     if test is None or test.tested is None:
         return modelled
