@@ -135,11 +135,13 @@ def test_k_s_interval_beside_a_term_named_by_its_own_shape_reaches_a_term_beside
     # for noise, the viscosity is named (weak) by its own shape with K 28% low, and the relaxation is proven by
     # nothing. Its pairs unfitted, K's interval was the viscosity model's alone, [1.36e-16, 1.63e-16] m² (the
     # default basis), and missed the truth; grown from the viscosity, the pairs the criterion does not rule out
-    # reach it.
+    # reach it ([1.32e-16, 4.49e-16] at stop 104). Since stop 105 it also reads the correlation of the viscosity
+    # model's residual in contact, which holds the relaxation that model misses: the upper side is open.
     effects = {"solid_relaxation": {"g": 0.1, "tau": 0.1}, "solid_viscosity": {"gamma": 10.0}}
     truth = Experiment(**SOFT, samples=1000, seed=0, effects=effects)
     write_recordings(tmp_path / "set", *simulate(truth))
     d = run(tmp_path / "set", coarse_cache, tmp_path / "run", *QUICK, "diagnosis.design=false").diagnosis
     assert [entry["term"] for entry in d["left_out"]] == ["solid_viscosity"]
     low, high = d["permeability"]["corrected_interval"]
-    assert d["permeability"]["corrected"] < 0.8 * truth.permeability and low <= truth.permeability <= high
+    assert d["permeability"]["corrected"] < 0.8 * truth.permeability
+    assert low is not None and low <= truth.permeability and (high is None or truth.permeability <= high)
