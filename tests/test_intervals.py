@@ -104,7 +104,6 @@ def test_the_noise_along_a_shape_by_the_recursive_filter_is_the_dense_quadratic_
     assert intervals._correlated(shape, positions, curve, noise) == pytest.approx(
         shape @ dense @ shape / (shape @ shape), rel=1e-12
     )
-    assert intervals._span(noise) == pytest.approx(0.6 + 0.4 * 1.9 / 0.1)
 
 
 def test_a_correlation_longer_than_the_baselines_show_is_read_off_the_fit_s_residual():

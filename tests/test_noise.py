@@ -21,6 +21,7 @@ from ptwin.data.noise import (
     curve_noise,
     detrended_lag_sums,
     level_settled,
+    mean_inflation,
     model_inflation,
     pooled,
     settled,
@@ -320,3 +321,10 @@ def test_a_curve_whose_noise_reads_zero_off_its_second_differences_is_refused(tm
     meta = folder / "meta.yaml"
     meta.write_text(meta.read_text() + "noise_std: 1.0e-10\n")
     assert prepare(settings, progress=lambda _: None).noise_floor == pytest.approx(1e-10, rel=1e-9, abs=0)
+
+
+def test_the_inflation_of_a_long_mean_is_the_limit_of_the_block_inflation():
+    # White + AR(1), c 0.4, φ 0.9: (1 − c) + c(1 + φ)/(1 − φ) = 8.2, what means of ever longer blocks tend to.
+    assert mean_inflation(0.4, 0.9) == pytest.approx(0.6 + 0.4 * 1.9 / 0.1)
+    assert model_inflation(0.4, 0.9, 200_000) == pytest.approx(mean_inflation(0.4, 0.9), rel=1e-3)
+    assert mean_inflation(-0.3, 0.5) == 1.0  # anti-correlated noise is never read as more informative than white

@@ -100,6 +100,12 @@ def model_inflation(share: float, memory: float, block: int) -> float:
     return float(1.0 + 2.0 * share * np.sum((1.0 - k / block) * memory**k))
 
 
+def mean_inflation(share: float, memory: float) -> float:
+    """κ² of white + AR(1) noise for the mean of a record far longer than its memory, ``model_inflation``'s limit
+    (1 − c) + c(1 + φ)/(1 − φ), never below 1: how many samples one independent sample's worth of it spans."""
+    return max(1.0, (1.0 - share) + share * (1.0 + memory) / (1.0 - memory))
+
+
 def ar1_inflation(lag1: float, block: int) -> float:
     """κ² of pure AR(1) noise (c = 1, φ = ``lag1``)."""
     return model_inflation(1.0, lag1, block)

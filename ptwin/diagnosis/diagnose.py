@@ -962,8 +962,9 @@ def _permeability_notes(fit: PhysicsFit, samples: Samples) -> list[str]:
     model = fit.model
     with torch.no_grad():
         radius = smooth_contact_radius(model.depth(samples), model.probe_radius)[samples.in_contact].max().item()
-    spans = [samples.time[(samples.curve == i) & samples.in_contact] for i in range(len(samples.curve_ids))]
-    duration = max((span.max() - span.min()).item() for span in spans if span.numel())
+    duration = max(
+        (span.max() - span.min()).item() for span in samples.in_contact_by_curve(samples.time) if span.numel()
+    )
     viscosity = model.fluid.viscosity
     notes = [term.permeability_note(fit.permeability, viscosity, radius, duration) for term in model.terms.values()]
     return [f"{note}." for note in notes if note]

@@ -26,7 +26,7 @@ import math
 import numpy as np
 import torch
 
-from ptwin.data.noise import NoiseModel, autoregressive, residual_noise
+from ptwin.data.noise import NoiseModel, autoregressive, mean_inflation, residual_noise
 from ptwin.data.tails import fisher_exceeded
 from ptwin.diagnosis.null import StructureTest
 from ptwin.fitting.lm import FitError, Traced
@@ -147,8 +147,8 @@ def _noise_along(
     read on (Student's t squared: the noise's own scale is estimated), as the term-shape test reads a gain
     (``null.term_evidence``). λ: the structure test's noise model, read off the baselines (``StructureTest
     .inflation_on``), ν its blocks. λ': the correlation of ``fit``'s own residual in contact
-    (``_residual_correlation``), ν its samples over the span of one independent one (``_span``). Without ``test``
-    (no noise model to judge by), κ² alone.
+    (``_residual_correlation``), ν its samples over the inflation of their mean (``mean_inflation``). Without
+    ``test`` (no noise model to judge by), κ² alone.
 
     κ² is the variance of block means over white noise's, and a smooth shape sums the noise over far more than
     a block: under the bench-sets' p07 noise (AR(1) of 20-sample memory, 40% white, κ² 15.6 at 50-sample blocks)
@@ -177,19 +177,13 @@ def _noise_along(
     if read is None:
         return modelled
     positions, curve = index.cpu().numpy(), samples.curve[index].cpu().numpy()
-    return max(modelled, _correlated(shape, positions, curve, read) * _student(read.samples / _span(read)))
+    independent = read.samples / mean_inflation(read.share, read.memory)
+    return max(modelled, _correlated(shape, positions, curve, read) * _student(independent))
 
 
 def _student(blocks: float) -> float:
     """F(1, ν)'s 95% point over χ²₁'s: a variance read off ν independent blocks."""
     return 1.0 if math.isinf(blocks) else fisher_exceeded(0.05, 1, blocks) / LEVEL
-
-
-def _span(noise: NoiseModel) -> float:
-    """How many samples one independent sample's worth of ``noise`` spans (≥ 1): the variance of a long mean
-    over white noise's, (1 − c) + c(1 + φ)/(1 − φ) for white + AR(1) of share c and memory φ."""
-    share, memory = noise.share, noise.memory
-    return max(1.0, (1.0 - share) + share * (1.0 + memory) / (1.0 - memory))
 
 
 def _residual_correlation(fit: PhysicsFit, samples: Samples, index: torch.Tensor) -> NoiseModel | None:
@@ -198,9 +192,8 @@ def _residual_correlation(fit: PhysicsFit, samples: Samples, index: torch.Tensor
     contact. A residual holds the noise and what the model misses, so this reads the noise's correlation or more;
     the structure test, which names what a model misses, never reads it."""
     with torch.no_grad():
-        scaled = (fitted_difference(fit.model, samples, index) / samples.noise_floor).cpu().numpy()
-    curve, in_contact = samples.curve.cpu().numpy(), samples.in_contact.cpu().numpy()
-    records = [scaled[(curve == i) & in_contact] for i in range(len(samples.curve_ids))]
+        scaled = fitted_difference(fit.model, samples, index) / samples.noise_floor
+    records = [record.cpu().numpy() for record in samples.in_contact_by_curve(scaled)]
     return residual_noise(records, 1.0, 1.0, READ_LAGS, 1, "the fit's residual in contact")
 
 

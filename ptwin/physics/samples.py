@@ -65,6 +65,11 @@ class Samples:
         """bool: the samples a fit may use: those in contact and those just before it (``pins_contact``)."""
         return self.in_contact | self.pins_contact
 
+    def in_contact_by_curve(self, values: torch.Tensor) -> list[torch.Tensor]:
+        """``values`` (one per sample) on each curve's samples in contact, in ``curve_ids`` order: the records a
+        residual's correlation is read on."""
+        return [values[(self.curve == i) & self.in_contact] for i in range(len(self.curve_ids))]
+
     @classmethod
     def from_curves(
         cls,

@@ -328,10 +328,8 @@ def _residual_noise(
 def _contact_records(samples: Samples, predict: Callable[[Samples], torch.Tensor]) -> tuple[list[np.ndarray], float]:
     """(each curve's residual of ``predict`` on its samples in contact [N], the sampling step [s])."""
     with torch.no_grad():
-        residual = (predict(samples) - samples.force).cpu().numpy()
-    curve, in_contact = samples.curve.cpu().numpy(), samples.in_contact.cpu().numpy()
-    records = [residual[(curve == i) & in_contact] for i in range(len(samples.curve_ids))]
-    return records, float(np.median(np.diff(samples.time.cpu().numpy()[curve == 0])))
+        records = [r.cpu().numpy() for r in samples.in_contact_by_curve(predict(samples) - samples.force)]
+    return records, float(np.median(np.diff(samples.time[samples.curve == 0].cpu().numpy())))
 
 
 def candidate_settings(prepared: Prepared, settings: Settings) -> tuple[DiagnosisSettings, list[str]]:
