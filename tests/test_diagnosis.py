@@ -1207,12 +1207,11 @@ def test_an_unexplained_k_that_ran_past_the_field_is_said_as_that_limit():
 def test_diagnosis_json_gives_no_value_for_a_k_run_to_the_field_s_limit():
     # Real PAAm F as recorded: the corrected K ran to 1.03e-6 m², past the field's 1e-9 (no fluid force), beside
     # structure no term explains, and diagnosis.json gave it as a number; real agarose B's base model 1.58e-9 m².
-    from types import SimpleNamespace
-
+    from ptwin.data.noise import NoiseModel
     from ptwin.diagnosis.diagnose import Diagnosis
 
     def written(base, corrected, interval, rivals=None):
-        noise = SimpleNamespace(std=1e-11, correlation_time=0.0, source="pre-contact baseline", inflation=1.0)
+        noise = NoiseModel(1e-11, 0.0, 1.0, 0.0, "pre-contact baseline", 1000)
         permeability = {"base": base, "corrected": corrected, "corrected_std": None, "corrected_interval": interval}
         groups = [{"terms": ["base model", "a"], "tell_apart": "a hold", "permeability": rivals or {}}]
         d = Diagnosis(False, "", [], ("a",), {}, [], [], groups, True, {}, {}, noise, permeability)

@@ -25,6 +25,7 @@ from ptwin.data.noise import (
     model_inflation,
     pooled,
     settled,
+    slope_variance,
     trend_basis,
     with_std,
 )
@@ -328,3 +329,58 @@ def test_the_inflation_of_a_long_mean_is_the_limit_of_the_block_inflation():
     assert mean_inflation(0.4, 0.9) == pytest.approx(0.6 + 0.4 * 1.9 / 0.1)
     assert model_inflation(0.4, 0.9, 200_000) == pytest.approx(mean_inflation(0.4, 0.9), rel=1e-3)
     assert mean_inflation(-0.3, 0.5) == 1.0  # anti-correlated noise is never read as more informative than white
+
+
+def baselines_of_a_set(rng, speeds, spread=0.0, lag1=0.0, size=300):
+    """The noise models of baselines of ``size`` samples at ``speeds`` (one sampling rate: the z spacing grows with
+    the speed), each with the instrument's tilt and a drag gradient ∝ speed, white or AR(1) noise of 10 pN, and a
+    slope of its own of ``spread`` standard errors of a slope over white noise (a drift straight over a baseline)."""
+    step, tilt, drag = 1e-3, 3e-3, 2e2  # [s], [N/m], [N s/m²]
+    own = spread * np.sqrt(slope_variance(size, 0.0, 0.0))
+    models = []
+    for speed in speeds:
+        z = -1e-6 + speed * step * np.arange(size)
+        noise = correlated_noise(rng, size, 1e-11, lag1) + 1e-11 * own * rng.standard_normal() * np.arange(size)
+        models.append(baseline_noise(step * np.arange(size), z, (tilt + drag * speed) * z + noise, 50))
+    return models
+
+
+@pytest.mark.parametrize("lag1", [0.0, 0.5])
+@pytest.mark.parametrize("speeds", [(2e-6,) * 4, (1e-6, 4e-6, 16e-6, 64e-6)])
+def test_baseline_slopes_within_the_noise_read_as_a_drift_at_the_false_alarm_rate(lag1, speeds):
+    # 300 sets of four baselines whose slopes are the tilt, the drag gradient and noise: the drift's χ² exceeds its
+    # 1% quantile 0 to 4 times (measured); with no line in the speed fitted, 300 of 300 sets at four speeds did.
+    rng = np.random.default_rng(11)
+    drifts = [
+        pooled(baselines_of_a_set(rng, speeds, lag1=lag1), [1] * 4, [1e-3] * 4, 50, 0.01).drift for _ in range(300)
+    ]
+    read = [d for d in drifts if d is not None]  # None: baselines unsettled at their start left too few
+    assert len(read) >= 290 and sum(d.share > 0 for d in read) <= 7
+    assert np.mean([d.chi_square / d.dof for d in read]) == pytest.approx(1.0, abs=0.2)
+
+
+def test_baseline_slopes_that_scatter_beyond_the_noise_read_as_a_drift_of_their_size():
+    # Eighty curves at one speed, each baseline with a slope of its own of 3 standard errors: a drift whose slope
+    # variance over a baseline is 9 times white noise's on top of it.
+    rng = np.random.default_rng(12)
+    models = baselines_of_a_set(rng, (2e-6,) * 80, spread=3.0)
+    drift = pooled(models, [1] * 80, [1e-3] * 80, 50, 0.01).drift
+    assert drift.dof >= 72 and drift.memory == pytest.approx(np.exp(-1 / 300), rel=0.01)  # a start unsettled: a few out
+    excess = drift.share * slope_variance(300, 1.0, drift.memory) / slope_variance(300, 0.0, 0.0)
+    assert excess == pytest.approx(9.0, rel=0.35)  # χ² on ~79 degrees of freedom: ±16%
+    # Four such curves: beyond the noise at most seeds (32 of 40 measured); two at two speeds leave the line in the
+    # speed no degree of freedom, so nothing is read
+    found = [
+        pooled(m, [1] * 4, [1e-3] * 4, 50, 0.01).drift.share > 0
+        for m in (baselines_of_a_set(rng, (2e-6,) * 4, 3.0) for _ in range(40))
+    ]
+    assert sum(found) >= 20
+    assert pooled(baselines_of_a_set(rng, (5e-6, 15e-6), 3.0), [1, 1], [1e-3] * 2).drift is None
+
+
+def test_the_slope_variance_is_the_quadratic_form_of_the_noise_models_correlation():
+    x = np.arange(200) - 99.5
+    lags = np.abs(np.subtract.outer(np.arange(200), np.arange(200)))
+    correlation = np.where(lags == 0, 1.0, 0.4 * 0.9**lags)
+    assert slope_variance(200, 0.4, 0.9) == pytest.approx(x @ correlation @ x / (x @ x) ** 2, rel=1e-12)
+    assert slope_variance(200, 0.0, 0.0) == pytest.approx(12 / (200**3 - 200), rel=1e-12)

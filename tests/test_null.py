@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from ptwin.data.kinematics import curve_kinematics
-from ptwin.data.noise import NoiseModel, model_inflation
+from ptwin.data.noise import Drift, NoiseModel, model_inflation
 from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.diagnosis.locate import pooled_whiteness
 from ptwin.diagnosis.null import MODEL_ERROR, TermEvidence, structure_test
@@ -35,11 +35,19 @@ def flat_samples(curves: int, length: int, std: float, inflation: float) -> Samp
     )
 
 
-@pytest.mark.parametrize(("share", "memory"), [(0.0, 0.0), (0.6, np.exp(-1 / 5))])
-def test_noise_alone_exceeds_the_threshold_as_often_as_stated(share, memory):
-    # Known κ² (ν = ∞), no reference: W of 600 simulated residuals against the stated 10% quantile.
+@pytest.mark.parametrize(
+    ("share", "memory", "drift"),
+    [(0.0, 0.0, 0.0), (0.6, np.exp(-1 / 5), 0.0), (0.0, 0.0, 0.1), (0.6, np.exp(-1 / 5), 0.3)],
+)
+def test_noise_alone_exceeds_the_threshold_as_often_as_stated(share, memory, drift):
+    # Known κ² (ν = ∞), no reference: W of 600 simulated residuals against the stated 10% quantile; where the
+    # baselines held a drift (``noise.Drift``: an AR(1) of 300-sample memory, ``drift`` of the variance on top),
+    # the residuals carry it and the test simulates it (without it, W of white noise with a drift of 0.1 exceeded
+    # white noise's 10% quantile in 600 of 600).
     inflation = max(1.0, model_inflation(share, memory, BLOCK))
+    slow = np.exp(-1 / 300)
     noise = NoiseModel(2e-10, share * memory, inflation, 0.0, "known", 0, share, memory)
+    noise = replace(noise, drift=Drift(20.0, 3, drift, slow, 0.3) if drift else None)
     samples = flat_samples(3, 1000, 2e-10, inflation)
     index = torch.arange(3000)
     test = structure_test(samples, index, None, noise, BLOCK, 0.1)
@@ -47,7 +55,9 @@ def test_noise_alone_exceeds_the_threshold_as_often_as_stated(share, memory):
     draws = []
     for _ in range(600):
         parts = [
-            np.sqrt(1 - share) * rng.standard_normal(1000) + np.sqrt(share) * correlated_noise(rng, 1000, 1.0, memory)
+            np.sqrt(1 - share) * rng.standard_normal(1000)
+            + np.sqrt(share) * correlated_noise(rng, 1000, 1.0, memory)
+            + correlated_noise(rng, 1000, np.sqrt(drift), slow)
             for _ in range(3)
         ]
         residual = torch.from_numpy(np.concatenate(parts) * 2e-10)

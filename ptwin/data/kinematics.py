@@ -33,7 +33,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -199,6 +199,8 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
         pre_contact = (z < 0) & approach
         free = approach & (z <= PINNING_TRAVEL * min(z[0], 0.0))
         noise = curve_noise(time, z, force, free, block)
+        if baseline is not None and noise.slope is not None:  # the set's drift reads slopes as recorded
+            noise = replace(noise, slope=replace(noise.slope, value=noise.slope.value + baseline.tilt))
         if meta.noise_std:
             noise = with_std(noise, meta.noise_std, "noise_std of meta.yaml")
         offset = baseline.offset if baseline else (float(force[pre_contact].mean()) if pre_contact.any() else None)

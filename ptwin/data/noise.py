@@ -34,16 +34,27 @@ A ``noise_std`` a lab wrote down replaces σ only: the correlation is still meas
 
 ``blocks`` ν counts the independent block means κ² rests on (baseline samples / block):
 the whiteness test's null distribution depends on it (``ptwin.diagnosis.locate``).
+
+A baseline is a few hundred samples, and the line removed from it hides whatever drifts over
+longer spans: the drift of real cell noise bends each curve by a slope of its own, which a
+detrended baseline reads as white (real-noise.md: cells' block variance grows with the window).
+The set's baselines see it together: their slopes (before any line was removed) are one common
+tilt in z (virtual deflection) plus each curve's noise, χ² on n − 1 degrees of freedom under the
+model; beyond its (1 − false alarm) quantile they hold a drift the model lacks (``Drift``), added
+to the noise the tests simulate as an AR(1) part of the baselines' own length, the longest span
+they measured, of the variance that makes the slopes' expected scatter their χ².
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 import scipy.fft
+
+from ptwin.data.tails import chi_square_exceeded
 
 MIN_BASELINE = 100  # samples of pre-contact baseline for a curve's own measured noise model
 RINGING = 2.0  # a baseline rings where its first block has this many times the variance of any settled one
@@ -65,6 +76,30 @@ _SHARES = np.linspace(-0.5, 1.0, 61)  # c grid (anti-correlated cell noise has c
 
 
 @dataclass(frozen=True)
+class BaselineSlope:
+    """A curve's baseline slope as recorded: dF/dz [N/m] of the samples its noise was read on (a line removed
+    before added back), their spacing in z [m] and the probe's speed there [m/s]."""
+
+    value: float
+    step: float
+    speed: float
+
+
+@dataclass(frozen=True)
+class Drift:
+    """The set's baseline slopes about their common tilt: ``chi_square`` on ``dof`` degrees of freedom under the
+    noise model. Beyond what noise alone exceeds one time in 1/false alarm, the drift the model lacks: an AR(1)
+    part of memory φ ``memory`` per sample (``correlation_time`` [s]), the baselines' median length, and variance
+    ``share``·σ², which makes the slopes' expected χ² what they read; else ``share`` is 0."""
+
+    chi_square: float
+    dof: int
+    share: float
+    memory: float
+    correlation_time: float
+
+
+@dataclass(frozen=True)
 class NoiseModel:
     """The noise of one curve, or of a whole recording set (``pooled``)."""
 
@@ -83,10 +118,14 @@ class NoiseModel:
     # σ read off second differences as if the noise were white [N], where ``std`` is it corrected for the set's
     # correlation (``corrected``); None where σ was measured otherwise
     differences: float | None = None
+    slope: BaselineSlope | None = None  # a curve's: its baseline's slope as recorded (``Drift``)
+    drift: Drift | None = None  # a set's: what its baselines' slopes say of the noise beyond their length
 
     def as_dict(self) -> dict:
         """Every number of the model (results.json), without the baseline record."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("record", "short", "differences")}
+        skipped = ("record", "short", "differences", "slope", "drift")
+        numbers = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in skipped}
+        return {**numbers, "drift": None if self.drift is None else asdict(self.drift)}
 
     def autocorrelation(self, lags: np.ndarray) -> np.ndarray:
         """ρ_k of the model at ``lags`` (ρ₀ = 1)."""
@@ -241,7 +280,8 @@ def _from_records(records: list[np.ndarray], block: int, step: float, source: st
 def baseline_noise(time: np.ndarray, z: np.ndarray, force: np.ndarray, block: int) -> NoiseModel | None:
     """The noise model of a baseline (samples where the tip is free), or None if it is too short.
 
-    A straight line force(z) is removed first: the baseline's offset and tilt are not noise.
+    A straight line force(z) is removed first: the baseline's offset and tilt are not noise; its slope is kept
+    for the set's drift (``Drift``).
     """
     if force.size < MIN_BASELINE:
         return None
@@ -250,7 +290,11 @@ def baseline_noise(time: np.ndarray, z: np.ndarray, force: np.ndarray, block: in
     noise = _detrended(z[start:], force[start:])
     if not np.any(noise):
         return None
-    return replace(_from_records([noise], block, float(np.median(np.diff(time))), BASELINE), unsettled=start)
+    step = float(np.median(np.diff(time)))
+    spacing = float(np.median(np.diff(z[start:])))
+    slope = BaselineSlope(float(np.polyfit(z[start:], force[start:], 1)[0]), spacing, spacing / step)
+    model = _from_records([noise], block, step, BASELINE)
+    return replace(model, unsettled=start, slope=slope)
 
 
 def settled(force: np.ndarray, block: int = 50) -> int:
@@ -384,11 +428,13 @@ def difference_factor(correlation: NoiseModel) -> float:
     return math.sqrt(6.0 / (6.0 - 8.0 * rho1 + 2.0 * rho2))
 
 
-def pooled(models: list[NoiseModel], weights: list[float], steps: list[float], block: int = 50) -> NoiseModel:
+def pooled(
+    models: list[NoiseModel], weights: list[float], steps: list[float], block: int = 50, false_alarm: float = 0.01
+) -> NoiseModel:
     """The set's noise: σ averaged with ``weights`` (fitted samples per curve); the correlation fitted on
     every measured baseline at once (one instrument, one sample), short ones too where no curve has a long
-    one, else white. A curve whose σ came from second differences has it corrected for that correlation
-    (``corrected``)."""
+    one, else white; the drift its long baselines' slopes hold beyond it at ``false_alarm`` (``drift``). A curve
+    whose σ came from second differences has it corrected for that correlation (``corrected``)."""
     records = [m.record for m in models if m.record is not None]
     source = models[0].source
     if not records:
@@ -408,4 +454,49 @@ def pooled(models: list[NoiseModel], weights: list[float], steps: list[float], b
         source=sources.pop() if len(sources) == 1 else BASELINE,
         record=None,
         unsettled=sum(m.unsettled for m in models),
+        drift=drift(models, correlation, float(np.median(steps)), false_alarm),
     )
+
+
+def drift(models: list[NoiseModel], correlation: NoiseModel, step: float, false_alarm: float) -> Drift | None:
+    """What the curves' baseline slopes (``models``' own) say of the noise beyond the baselines' length, under the
+    set's ``correlation`` (``Drift``; ``step`` [s] the sampling step); None where the slopes leave no degree of
+    freedom. A free probe's slope in z is the instrument's tilt (virtual deflection), the same on every curve, plus
+    the gradient of the fluid's drag as the gap closes, which grows with the speed: real PAAm approaches at 5 and
+    15 µm/s rose by 1.70e-5 and 3.17e-5 N/m (standard errors 3e-7, 5e-7). So a line in the speed (a level where
+    every curve has one speed) is fitted to the slopes, weights w_c the inverse of slope c's variance V_c under
+    the model, and χ² is what it leaves. Where each slope's variance is V_c(1 + s·r_c) (r_c: a unit drift's slope
+    variance over the model's), χ²'s expectation is Σ (1 + s·r_c)(1 − h_c), h_c the fit's leverages: that gives
+    s."""
+    measured = [m for m in models if m.slope is not None and m.slope.step > 0 < m.std and m.blocks >= 4]
+    speeds = np.array([m.slope.speed for m in measured])
+    design = np.ones((len(measured), 1))
+    if speeds.size and np.ptp(speeds) > 0.01 * speeds.max():
+        design = np.column_stack([design, speeds / speeds.max()])
+    dof = len(measured) - design.shape[1]
+    if dof < 1:
+        return None
+    lengths = [m.record.size for m in measured]
+    memory = math.exp(-1.0 / float(np.median(lengths)))
+    # never below white noise's, as κ² never is: a fitted anti-correlation would make noise alone read as drift
+    white = [slope_variance(n, 0.0, 0.0) for n in lengths]
+    model = np.maximum([slope_variance(n, correlation.share, correlation.memory) for n in lengths], white)
+    unit_drift = np.array([slope_variance(n, 1.0, memory) for n in lengths])
+    root = np.sqrt(np.array([(m.slope.step / m.std) ** 2 for m in measured]) / model)  # √w_c, V_c in (N/m)²
+    scaled = design * root[:, None]
+    q, _ = np.linalg.qr(scaled)
+    slopes = np.array([m.slope.value for m in measured]) * root
+    chi_square = float(np.sum((slopes - q @ (q.T @ slopes)) ** 2))
+    kept = 1.0 - np.sum(q**2, axis=1)
+    share = (chi_square - kept.sum()) / float(np.sum(unit_drift / model * kept))
+    beyond = chi_square > chi_square_exceeded(false_alarm, dof)
+    return Drift(chi_square, dof, float(share) if beyond else 0.0, memory, correlation_time(memory, step))
+
+
+def slope_variance(length: int, share: float, memory: float) -> float:
+    """The variance of a least-squares line's slope per sample over ``length`` samples of unit-variance white +
+    AR(1) noise (share c, memory φ): xᵀRx/(xᵀx)², x the samples about their middle, R = (1 − c)I + cT_φ."""
+    x = np.arange(length) - (length - 1) / 2.0
+    square = float(x @ x)
+    correlated = float(x @ _apply_ar(x[:, None], np.array([memory]))[:, 0, 0]) if memory > 0.0 else square
+    return ((1.0 - share) * square + share * correlated) / square**2

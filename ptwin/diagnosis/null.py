@@ -166,16 +166,24 @@ def beyond_model_error(flexible: float, model: float, noise_std: float) -> bool:
 
 
 def _draw(rng: np.random.Generator, size: int, noise: NoiseModel) -> np.ndarray:
-    """(size, REPLICATES) unit-variance draws of white + AR(1) noise (share c, memory φ), stationary from
-    the first sample (anti-correlated models are drawn white: κ² never goes below 1)."""
+    """(size, REPLICATES) draws of white + AR(1) noise (share c, memory φ) of unit variance, stationary from
+    the first sample (anti-correlated models are drawn white: κ² never goes below 1), plus the drift the set's
+    baselines hold beyond the model (``NoiseModel.drift``; variance its share)."""
     white = rng.standard_normal((size, REPLICATES))
     share, memory = noise.share, noise.memory
-    if share <= 0.0 or memory <= 0.0:
-        return white
+    draws = white
+    if share > 0.0 and memory > 0.0:
+        draws = math.sqrt(1.0 - share) * white + math.sqrt(share) * _stationary_ar(rng, size, memory)
+    if noise.drift is not None and noise.drift.share > 0.0:
+        draws = draws + math.sqrt(noise.drift.share) * _stationary_ar(rng, size, noise.drift.memory)
+    return draws
+
+
+def _stationary_ar(rng: np.random.Generator, size: int, memory: float) -> np.ndarray:
+    """(size, REPLICATES) draws of unit-variance AR(1) noise of memory φ, stationary from the first sample."""
     start = rng.standard_normal((1, REPLICATES))
     innovations = rng.standard_normal((size, REPLICATES))
-    correlated = autoregressive(innovations, memory, math.sqrt(1.0 - memory**2), start[0])
-    return math.sqrt(1.0 - share) * white + math.sqrt(share) * correlated
+    return autoregressive(innovations, memory, math.sqrt(1.0 - memory**2), start[0])
 
 
 def _whiteness(scaled: np.ndarray, block: int) -> np.ndarray:

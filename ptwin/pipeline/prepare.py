@@ -137,6 +137,7 @@ def prepare(settings: Settings, progress: Callable[[str], None] = print) -> Prep
         [max(int(c.in_contact.sum()), 1) for c in curves],
         _steps(curves),
         settings.diagnosis.block,
+        settings.diagnosis.false_alarm,
     )
     # σ read off second differences, corrected for the set's correlation before the law inherits the reference's
     curves = [replace(c, noise=corrected(c.noise, noise)) for c in curves]

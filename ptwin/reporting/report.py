@@ -176,7 +176,8 @@ def _fit(payload: dict, fitted: dict) -> list[str]:
         "## Fit",
         "",
         f"Noise: std {_nano(noise['std'])} nN, correlation time {correlation} ms, block-variance inflation "
-        f"{number(noise['inflation'], '.2f')} (from the {noise['source']}); every statistic above uses it.",
+        f"{number(noise['inflation'], '.2f')} (from the {noise['source']}); every statistic above uses it."
+        + _drift(noise.get("drift")),
         "",
         f"Permeability: base {permeability_words(fitted['base'], '.4g')}, corrected {_corrected_k(payload, fitted)}.",
         "",
@@ -187,6 +188,18 @@ def _fit(payload: dict, fitted: dict) -> list[str]:
         ratio = None if fit["test_rmse"] is None else fit["test_rmse"] / noise["std"]
         lines.append(f"| {name} | {_nano(fit['val_rmse'])} | {_nano(fit['test_rmse'])} | {number(ratio, '.2f')} |")
     return [*lines, ""]
+
+
+def _drift(drift: dict | None) -> str:
+    """The drift the baselines' slopes hold beyond the noise model, in a sentence ("" where none)."""
+    if drift is None or not drift["share"]:
+        return ""
+    return (
+        f" The baselines' slopes scatter about their common tilt beyond it (χ² {drift['chi_square']:.1f} on "
+        f"{drift['dof']} degrees of freedom): the tests of structure and of each term's shape add a drift of "
+        f"{drift['share']:.2g} of its variance, correlated over {number(drift['correlation_time'] * 1e3, '.2g')} ms "
+        "(the baselines' length)."
+    )
 
 
 def _corrected_k(payload: dict, fitted: dict) -> str:
