@@ -1255,6 +1255,28 @@ def test_the_report_says_where_a_k_left_null_sits():
     assert "diagnosis: corrected" in printed[1] and "no fluid force: ≥ 1e-09" in printed[1]
 
 
+def test_the_reports_noise_line_says_the_drift_the_baselines_hold():
+    # The cells' noise of p06's setting at seed 5: the slopes' χ² 9.7 on 2 degrees of freedom, a drift of 0.109.
+    from ptwin.reporting.report import _fit
+
+    permeability = {"base": 3e-16, "corrected": 3e-16, "corrected_std": None, "corrected_interval": [None, None]}
+    noise = {"std": 2e-10, "correlation_time": 0.0, "source": "pre-contact baseline", "inflation": 1.0}
+    payload = {"noise": noise, "unexplained": False, "fit": {}, "permeability": permeability}
+
+    def said(drift):
+        payload["noise"] = {**noise, "drift": drift}
+        return next(line for line in _fit(payload, permeability) if line.startswith("Noise"))
+
+    drift = {"chi_square": 9.7, "dof": 2, "share": 0.109, "memory": 0.996, "correlation_time": 0.0935}
+    assert said(drift).endswith(
+        "The baselines' slopes scatter about their common tilt beyond it (χ² 9.7 on 2 degrees of freedom): the tests "
+        "of structure and of each term's shape add a drift of 0.11 of its variance, correlated over 94 ms (the "
+        "baselines' length)."
+    )
+    within = said({**drift, "chi_square": 3.1, "share": 0.0})
+    assert within == said(None) and within.endswith("every statistic above uses it.")
+
+
 def test_the_printed_table_gives_k_s_interval_where_rivals_leave_it_no_std():
     from ptwin.reporting.report import print_summary
 
