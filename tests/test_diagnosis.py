@@ -1269,8 +1269,8 @@ def test_the_reports_noise_line_says_the_drift_the_baselines_hold():
 
     drift = {"chi_square": 9.7, "dof": 2, "share": 0.109, "memory": 0.996, "correlation_time": 0.0935}
     assert said(drift).endswith(
-        "The baselines' slopes scatter about their common tilt beyond it (χ² 9.7 on 2 degrees of freedom): the tests "
-        "of structure and of each term's shape add a drift of 0.11 of its variance, correlated over 94 ms (the "
+        "The baselines' slopes scatter about their line in the speed beyond it (χ² 9.7 on 2 degrees of freedom): the "
+        "tests of structure and of each term's shape add a drift of 0.11 of its variance, correlated over 94 ms (the "
         "baselines' length)."
     )
     within = said({**drift, "chi_square": 3.1, "share": 0.0})

@@ -38,11 +38,12 @@ the whiteness test's null distribution depends on it (``ptwin.diagnosis.locate``
 A baseline is a few hundred samples, and the line removed from it hides whatever drifts over
 longer spans: the drift of real cell noise bends each curve by a slope of its own, which a
 detrended baseline reads as white (real-noise.md: cells' block variance grows with the window).
-The set's baselines see it together: their slopes (before any line was removed) are one common
-tilt in z (virtual deflection) plus each curve's noise, χ² on n − 1 degrees of freedom under the
-model; beyond its (1 − false alarm) quantile they hold a drift the model lacks (``Drift``), added
-to the noise the tests simulate as an AR(1) part of the baselines' own length, the longest span
-they measured, of the variance that makes the slopes' expected scatter their χ².
+The set's baselines see it together: their slopes (before any line was removed) are the
+instrument's tilt in z and the drag's gradient, a line in the speed, plus each curve's noise: χ²
+on n − 2 degrees of freedom under the model (n − 1 at one speed); beyond its (1 − false alarm)
+quantile they hold a drift the model lacks (``Drift``), added to the noise the tests simulate as
+an AR(1) part of the baselines' own length, the longest span they measured, of the variance that
+makes the slopes' expected scatter their χ².
 """
 
 from __future__ import annotations
@@ -87,10 +88,10 @@ class BaselineSlope:
 
 @dataclass(frozen=True)
 class Drift:
-    """The set's baseline slopes about their common tilt: ``chi_square`` on ``dof`` degrees of freedom under the
-    noise model. Beyond what noise alone exceeds one time in 1/false alarm, the drift the model lacks: an AR(1)
-    part of memory φ ``memory`` per sample (``correlation_time`` [s]), the baselines' median length, and variance
-    ``share``·σ², which makes the slopes' expected χ² what they read; else ``share`` is 0."""
+    """The set's baseline slopes about their line in the speed (``drift``): ``chi_square`` on ``dof`` degrees of
+    freedom under the noise model. Beyond what noise alone exceeds one time in 1/false alarm, the drift the model
+    lacks: an AR(1) part of memory φ ``memory`` per sample (``correlation_time`` [s]), the baselines' median
+    length, and variance ``share``·σ², which makes the slopes' expected χ² what they read; else ``share`` is 0."""
 
     chi_square: float
     dof: int

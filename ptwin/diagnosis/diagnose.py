@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 
 import torch
 
@@ -167,7 +167,7 @@ class Diagnosis:
                 "correlation_time": self.noise.correlation_time,
                 "source": self.noise.source,
                 "inflation": self.noise.inflation,
-                "drift": None if self.noise.drift is None else asdict(self.noise.drift),
+                "drift": self.noise.as_dict()["drift"],
             },
             "fit": self.fit,
             "notes": self.notes,

@@ -195,7 +195,7 @@ def _drift(drift: dict | None) -> str:
     if drift is None or not drift["share"]:
         return ""
     return (
-        f" The baselines' slopes scatter about their common tilt beyond it (χ² {drift['chi_square']:.1f} on "
+        f" The baselines' slopes scatter about their line in the speed beyond it (χ² {drift['chi_square']:.1f} on "
         f"{drift['dof']} degrees of freedom): the tests of structure and of each term's shape add a drift of "
         f"{drift['share']:.2g} of its variance, correlated over {number(drift['correlation_time'] * 1e3, '.2g')} ms "
         "(the baselines' length)."
