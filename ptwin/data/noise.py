@@ -496,8 +496,15 @@ def drift(models: list[NoiseModel], correlation: NoiseModel, step: float, false_
 
 def slope_variance(length: int, share: float, memory: float) -> float:
     """The variance of a least-squares line's slope per sample over ``length`` samples of unit-variance white +
-    AR(1) noise (share c, memory φ): xᵀRx/(xᵀx)², x the samples about their middle, R = (1 − c)I + cT_φ."""
+    AR(1) noise (share c, memory φ): xᵀRx/(xᵀx)², x the samples about their middle (``correlated_square``)."""
     x = np.arange(length) - (length - 1) / 2.0
-    square = float(x @ x)
-    correlated = float(x @ _apply_ar(x[:, None], np.array([memory]))[:, 0, 0]) if memory > 0.0 else square
-    return ((1.0 - share) * square + share * correlated) / square**2
+    return correlated_square(x, share, memory) / float(x @ x) ** 2
+
+
+def correlated_square(values: np.ndarray, share: float, memory: float) -> float:
+    """sᵀRs of a record s (``values``) under unit-variance white + AR(1) noise, R = (1 − c)I + cT_φ (T_ij =
+    φ^|i−j|, share c, memory φ): sᵀs + 2c Σ_{i<k} s_i s_k φ^(k−i), the lagged sum by a recursive filter."""
+    square = float(values @ values)
+    if share == 0.0 or memory <= 0.0:
+        return square
+    return square + 2.0 * share * (float(values @ autoregressive(values, memory)) - square)

@@ -26,7 +26,7 @@ import math
 import numpy as np
 import torch
 
-from ptwin.data.noise import NoiseModel, autoregressive, mean_inflation, residual_noise
+from ptwin.data.noise import NoiseModel, correlated_square, mean_inflation, residual_noise
 from ptwin.data.tails import fisher_exceeded
 from ptwin.diagnosis.null import StructureTest
 from ptwin.fitting.lm import FitError, Traced
@@ -199,19 +199,18 @@ def _residual_correlation(fit: PhysicsFit, samples: Samples, index: torch.Tensor
 
 def _correlated(shape: np.ndarray, positions: np.ndarray, curve: np.ndarray, noise: NoiseModel) -> float:
     """λ' = sᵀRs / sᵀs of ``shape`` s on the samples at ``positions`` (sample numbers; R within each ``curve``:
-    ρ(k) = c·φ^|k| of ``noise``'s share c and memory φ beside its white part), by a recursive filter along each
-    curve's samples (zeros where ``positions`` skip one)."""
+    ρ(k) = c·φ^|k| of ``noise``'s share c and memory φ beside its white part), each curve's samples a record with
+    zeros where ``positions`` skip one (``correlated_square``)."""
     norm = float(shape @ shape)
-    if norm <= 0.0 or noise.share == 0.0 or noise.memory <= 0.0:
+    if norm <= 0.0:
         return 1.0
-    lagged = 0.0  # Σ_{i<k} s_i s_k φ^(k − i) over each curve
+    correlated = 0.0
     for c in np.unique(curve):
         on = curve == c
         full = np.zeros(positions[on].max() - positions[on].min() + 1)
         full[positions[on] - positions[on].min()] = shape[on]
-        carried = autoregressive(full, noise.memory)
-        lagged += float(full @ carried) - float(full @ full)
-    return (1.0 - noise.share) + noise.share * (norm + 2.0 * lagged) / norm
+        correlated += correlated_square(full, noise.share, noise.memory)
+    return correlated / norm
 
 
 def _lowest(settle, starts: list[torch.Tensor]) -> tuple[torch.Tensor, float] | None:
