@@ -97,6 +97,49 @@ def test_a_step_limit_crosses_the_e_folds_in_accepted_steps_of_that_length_from_
     assert len(steps) < 23  # the unlimited run's steps (above)
 
 
+def test_an_entry_stepped_in_its_reciprocal_keeps_every_promise_where_the_residual_is_linear_there():
+    # The same 16 e-folds stepped in u = e^(−θ), where the residual is linear (log K's Darcy force in 1/K): each
+    # step's promised decrease is the decrease it gives, so none is rejected. Three steps at the limit, then one
+    # to within 1e-6 of θ = 0: 7 steps, the last a rejection that ends the run; stepped in θ, 19 (7 rejected:
+    # the step after the third, asked for δ −8 where −2.2 was needed, went to the limit again).
+    t = torch.linspace(0.5, 2.0, 50, dtype=torch.float64)
+
+    def residual(theta):
+        return (torch.exp(-theta[0]) - 1.0) * t
+
+    limit, start = torch.tensor([LOG_STEP], dtype=torch.float64), torch.tensor([16.0], dtype=torch.float64)
+    solver = LevenbergMarquardt(
+        residual, start, decrease=DAMPING_DECREASE, step_limit=limit, reciprocal=torch.tensor([True])
+    )
+    costs, steps = [0.5 * residual(start).square().sum().item()], []
+    solver.run(200, tolerance=1e-12, callback=lambda step: (steps.append(step), costs.append(step.cost)))
+    assert abs(solver.theta.item()) < 1e-8
+    assert [step.accepted for step in steps] == [True] * 6 + [False]
+    for step, before, after in zip(steps[:4], costs, costs[1:]):
+        assert before - after == pytest.approx(step.predicted, rel=1e-9)
+
+
+def test_an_entry_stepped_in_its_reciprocal_needs_a_step_limit_and_the_physics_fits_step_only_log_k_so():
+    from torch import nn
+
+    from ptwin.fitting.lm import ParameterVector
+    from ptwin.fitting.physics_fit import physics_solver
+    from ptwin.physics.model import PERMEABILITY
+
+    with pytest.raises(ValueError, match="finite step_limit"):
+        LevenbergMarquardt(lambda theta: theta, torch.zeros(1, dtype=torch.float64), reciprocal=torch.tensor([True]))
+    module = nn.Module()
+    module.fluid = nn.Module()
+    module.fluid.log_permeability = nn.Parameter(torch.tensor([-36.0], dtype=torch.float64))
+    module.log_tau = nn.Parameter(torch.tensor([0.0], dtype=torch.float64))
+    vector = ParameterVector(module, [PERMEABILITY, "log_tau"])
+    solver = physics_solver(lambda theta: theta, vector.get(), vector)
+    assert solver.reciprocal.tolist() == [True, False]
+    assert physics_solver(lambda theta: theta, vector.get()[1:], vector, torch.tensor([1])).reciprocal.tolist() == [
+        False
+    ]
+
+
 def test_the_physics_fits_move_every_parameter_fitted_in_log_at_most_two_decades_a_step():
     # A pore relaxation doing nothing (M 4e6 Pa), refitted with K fixed a little higher: its gradient nearly nil, one
     # step went from log M 19.9 to 449.8, where its derivatives overflow, and the profile read that as the model

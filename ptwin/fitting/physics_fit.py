@@ -37,7 +37,8 @@ DAMPING_DECREASE = 0.1
 # The most one LM step moves log K, or any parameter fitted in log (log M, log tau): two decades. F_D ∝ 1/K is
 # exponential in log K, and from the fluid-off start its linearisation promised steps of ten e-folds and more that fell
 # short; LM rejected three to seven of them while the damping grew (``tests/test_lm.py``; on the bench map's spots
-# those starts took 22 steps each, 9 of them rejected). Where a term does nothing its gradient is nearly nil and the
+# those starts took 22 steps each, 9 of them rejected). Stepped in 1/K (``physics_solver``), such a step asks for
+# thousands of e-folds, and the limit holds it too. Where a term does nothing its gradient is nearly nil and the
 # step unbounded: a pore relaxation at M 4e6 Pa, refitted with K fixed, went from log M 19.9 to 449.8 in one step,
 # where its derivatives overflow.
 LOG_STEP = math.log(100.0)
@@ -244,11 +245,14 @@ def physics_solver(
     entries: torch.Tensor | None = None,
 ) -> LevenbergMarquardt:
     """LM as the physics fits run it (``DAMPING_DECREASE``; log K and every parameter fitted in log, ``log_…``, moved
-    at most ``LOG_STEP`` a step) on θ, the ``entries`` of ``vector`` (None: all of them)."""
+    at most ``LOG_STEP`` a step; log K stepped in 1/K, where the Darcy force is linear) on θ, the ``entries`` of
+    ``vector`` (None: all of them)."""
     logs = [name for name in vector.names if name.rpartition(".")[2].startswith("log_")]
     limit = vector.expand(dict.fromkeys(logs, LOG_STEP), default=math.inf)
-    limit = limit if entries is None else limit[entries]
-    return LevenbergMarquardt(residual, theta, decrease=DAMPING_DECREASE, step_limit=limit)
+    reciprocal = vector.expand({PERMEABILITY: 1.0}, default=0.0).bool()
+    if entries is not None:
+        limit, reciprocal = limit[entries], reciprocal[entries]
+    return LevenbergMarquardt(residual, theta, decrease=DAMPING_DECREASE, step_limit=limit, reciprocal=reciprocal)
 
 
 def _least_squares(model: ForceModel, samples: Samples, index: torch.Tensor, iterations: int, tolerance: float):
