@@ -97,11 +97,11 @@ def test_a_step_limit_crosses_the_e_folds_in_accepted_steps_of_that_length_from_
     assert len(steps) < 23  # the unlimited run's steps (above)
 
 
-def test_an_entry_stepped_in_its_reciprocal_keeps_every_promise_where_the_residual_is_linear_there():
-    # The same 16 e-folds stepped in u = e^(−θ), where the residual is linear (log K's Darcy force in 1/K): each
-    # step's promised decrease is the decrease it gives, so none is rejected. Three steps at the limit, then one
-    # to within 1e-6 of θ = 0: 7 steps, the last a rejection that ends the run; stepped in θ, 19 (7 rejected:
-    # the step after the third, asked for δ −8 where −2.2 was needed, went to the limit again).
+def test_a_long_step_read_in_the_reciprocal_keeps_its_promise_where_the_residual_is_linear_there():
+    # The same 16 e-folds, log K's long steps read in u = e^(−θ), where the residual is linear (log K's Darcy force in
+    # 1/K): three steps at the limit, then one asked for δ −8, read as u × 9, to within 1e-6 of θ = 0, each
+    # promising the decrease it gives; the steps within the limit are θ's own. 7 steps, none rejected before the
+    # one that ends the run; read in θ, 19 (7 rejected: the step asked for δ −8 went to the limit again).
     t = torch.linspace(0.5, 2.0, 50, dtype=torch.float64)
 
     def residual(theta):
@@ -119,7 +119,7 @@ def test_an_entry_stepped_in_its_reciprocal_keeps_every_promise_where_the_residu
         assert before - after == pytest.approx(step.predicted, rel=1e-9)
 
 
-def test_an_entry_stepped_in_its_reciprocal_needs_a_step_limit_and_the_physics_fits_step_only_log_k_so():
+def test_an_entry_read_in_its_reciprocal_needs_a_step_limit_and_the_physics_fits_read_only_log_k_so():
     from torch import nn
 
     from ptwin.fitting.lm import ParameterVector

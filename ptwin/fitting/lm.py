@@ -4,8 +4,9 @@ Jacobians by reverse mode (``Traced``), Marquardt scaling
 (the damping acts on diag(JᵀJ), so parameters of any unit are treated alike), Nielsen's
 gain-ratio damping update, an optional per-parameter learning rate that scales
 each accepted step (a lower rate for K than for a network, as the paper trains), and an
-optional per-parameter step limit that shortens a longer step along its direction, and entries stepped in
-their reciprocal (an entry θ fitted in log whose residual is linear in e^(−θ), as log K's Darcy force is in 1/K).
+optional per-parameter step limit that shortens a longer step along its direction, and entries whose long
+steps are read in their reciprocal (an entry θ fitted in log whose residual is linear in e^(−θ), as log K's Darcy
+force is in 1/K).
 The state is a plain dict of tensors: a checkpoint resumes it exactly.
 
 A trial step the model cannot evaluate (a parameter outside the model's domain: a
@@ -137,12 +138,13 @@ class LevenbergMarquardt:
     of θ (default: no limit); a longer step is shortened along its direction, so it still promises a decrease.
     Where a residual is exponential in an entry (a force ∝ 1/K in log K) its linearisation promises far more
     than a step of many e-folds gives, and LM would learn that by rejected steps while the damping grows.
-    ``reciprocal``: the entries θ whose residual is linear in u = e^(−θ) (a mask; each needs a finite step limit):
-    their step is solved in u, where the linearisation is exact, and taken in θ, −ln(1 − δ) for the δ = −Δu/u
-    solved (``_moved``); the damped system and the promised decrease are the same as in θ, where δ is the step to
-    first order. From the fluid-off start (F_D ∝ 1/K at K 1e-9 m²), the force 1e4 times too small a step asks
-    for δ −1e4 in log K: 4.6 e-folds at the limit, where a step solved in log K overshoots to the limit and
-    is rejected while the damping grows (six times on the bench map's spots, then ten more accepted steps)."""
+    ``reciprocal``: the entries θ whose residual is linear in u = e^(−θ) (a mask; each needs a finite step limit).
+    Where θ's linearisation asks to lower θ by more than its limit, the step solved, δ, is read in u, where the
+    linearisation is exact (u moves by −δ·u), and θ moves by −ln(1 − δ) (``_moved``); the damped system and the
+    promised decrease are the step's own. Within the limit the two agree to first order and θ moves by δ, as
+    every other entry does. From the fluid-off start (F_D ∝ 1/K at K 1e-9 m²) log K's steps went to the limit
+    while the force stayed too small, and the one after them asked for δ −5 where −1.8 was needed: it went to the
+    limit again, overshot, and was rejected while the damping grew (six times on the bench map's spots)."""
 
     def __init__(
         self,
@@ -223,9 +225,10 @@ class LevenbergMarquardt:
             delta = -torch.linalg.solve(normal + s["damping"] * torch.diag(scale), gradient) * self.learning_rate
         except RuntimeError:  # singular even with damping: a larger damping next time
             delta, solved = torch.zeros_like(gradient), False
-        delta = delta * self._within_limits(delta)
+        inverted = self.reciprocal & (delta < -self.step_limit)  # log K's linearisation asks past the limit
+        delta = delta * self._within_limits(delta, inverted)
         predicted = -(gradient @ delta + 0.5 * delta @ normal @ delta)
-        candidate = s["theta"] + self._moved(delta)
+        candidate = s["theta"] + self._moved(delta, inverted)
         new_cost, traced = self._trial(candidate)
         gain = (cost - new_cost) / predicted if predicted > 0 else torch.tensor(-1.0)
         accepted = bool(torch.isfinite(new_cost) and gain > 0)
@@ -249,19 +252,19 @@ class LevenbergMarquardt:
             float(predicted) if solved else None,
         )
 
-    def _within_limits(self, delta: torch.Tensor) -> float:
-        """The largest fraction ≤ 1 of the solved step ``delta`` whose moves (``_moved``) stay within the step limits:
-        an entry stepped in its reciprocal moves −ln(1 − δ), within L where −(1 − e^(−L)) ≤ δ ≤ e^L − 1."""
+    def _within_limits(self, delta: torch.Tensor, inverted: torch.Tensor) -> float:
+        """The largest fraction ≤ 1 of the solved step ``delta`` whose moves (``_moved``) stay within the step limits
+        L: an ``inverted`` entry (δ < 0) moves −ln(1 − δ), within L where δ ≥ −(e^L − 1)."""
         if not delta.numel():
             return 1.0
-        reach = torch.where(delta < 0, torch.expm1(self.step_limit), -torch.expm1(-self.step_limit))
-        room = torch.where(self.reciprocal, reach, self.step_limit) / delta.abs()
+        room = torch.where(inverted, torch.expm1(self.step_limit), self.step_limit) / delta.abs()
         return min(1.0, float(room.min()))
 
-    def _moved(self, delta: torch.Tensor) -> torch.Tensor:
-        """How θ moves for the solved step ``delta``: δ, or −ln(1 − δ) for an entry stepped in its reciprocal
-        (u = e^(−θ) moves by −δ·u)."""
-        return torch.where(self.reciprocal, -torch.log1p(-delta.where(self.reciprocal, torch.zeros_like(delta))), delta)
+    @staticmethod
+    def _moved(delta: torch.Tensor, inverted: torch.Tensor) -> torch.Tensor:
+        """How θ moves for the solved step ``delta``: δ, or −ln(1 − δ) for an ``inverted`` entry (u = e^(−θ) moves
+        by −δ·u)."""
+        return torch.where(inverted, -torch.log1p(-delta.where(inverted, torch.zeros_like(delta))), delta)
 
     def run(
         self,

@@ -37,7 +37,7 @@ DAMPING_DECREASE = 0.1
 # The most one LM step moves log K, or any parameter fitted in log (log M, log tau): two decades. F_D ∝ 1/K is
 # exponential in log K, and from the fluid-off start its linearisation promised steps of ten e-folds and more that fell
 # short; LM rejected three to seven of them while the damping grew (``tests/test_lm.py``; on the bench map's spots
-# those starts took 22 steps each, 9 of them rejected). Stepped in 1/K (``physics_solver``), such a step asks for
+# those starts took 22 steps each, 9 of them rejected). Read in 1/K (``physics_solver``), such a step asks for
 # thousands of e-folds, and the limit holds it too. Where a term does nothing its gradient is nearly nil and the
 # step unbounded: a pore relaxation at M 4e6 Pa, refitted with K fixed, went from log M 19.9 to 449.8 in one step,
 # where its derivatives overflow.
@@ -245,8 +245,8 @@ def physics_solver(
     entries: torch.Tensor | None = None,
 ) -> LevenbergMarquardt:
     """LM as the physics fits run it (``DAMPING_DECREASE``; log K and every parameter fitted in log, ``log_…``, moved
-    at most ``LOG_STEP`` a step; log K stepped in 1/K, where the Darcy force is linear) on θ, the ``entries`` of
-    ``vector`` (None: all of them)."""
+    at most ``LOG_STEP`` a step; a step lowering log K by more than that read in 1/K, where the Darcy force is
+    linear) on θ, the ``entries`` of ``vector`` (None: all of them)."""
     logs = [name for name in vector.names if name.rpartition(".")[2].startswith("log_")]
     limit = vector.expand(dict.fromkeys(logs, LOG_STEP), default=math.inf)
     reciprocal = vector.expand({PERMEABILITY: 1.0}, default=0.0).bool()
