@@ -225,7 +225,7 @@ class LevenbergMarquardt:
             delta = -torch.linalg.solve(normal + s["damping"] * torch.diag(scale), gradient) * self.learning_rate
         except RuntimeError:  # singular even with damping: a larger damping next time
             delta, solved = torch.zeros_like(gradient), False
-        inverted = self.reciprocal & (delta < -self.step_limit)  # log K's linearisation asks past the limit
+        inverted = self.reciprocal & (delta < -self.step_limit)  # θ's linearisation asks to lower θ past its limit
         delta = delta * self._within_limits(delta, inverted)
         predicted = -(gradient @ delta + 0.5 * delta @ normal @ delta)
         candidate = s["theta"] + self._moved(delta, inverted)

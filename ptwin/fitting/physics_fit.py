@@ -37,10 +37,11 @@ DAMPING_DECREASE = 0.1
 # The most one LM step moves log K, or any parameter fitted in log (log M, log tau): two decades. F_D ∝ 1/K is
 # exponential in log K, and from the fluid-off start its linearisation promised steps of ten e-folds and more that fell
 # short; LM rejected three to seven of them while the damping grew (``tests/test_lm.py``; on the bench map's spots
-# those starts took 22 steps each, 9 of them rejected). Read in 1/K (``physics_solver``), such a step asks for
-# thousands of e-folds, and the limit holds it too. Where a term does nothing its gradient is nearly nil and the
-# step unbounded: a pore relaxation at M 4e6 Pa, refitted with K fixed, went from log M 19.9 to 449.8 in one step,
-# where its derivatives overflow.
+# those starts took 22 steps each, 9 of them rejected). Read in 1/K (``physics_solver``), the first such step asks
+# for 5 to 16 e-folds on a bench-map spot (the whole way to its K of 1.7e-16 m², or what the term leaves of it), and
+# the limit holds it too. Where a term does nothing its gradient is nearly nil and the step unbounded: a pore
+# relaxation at M 4e6 Pa, refitted with K fixed, went from log M 19.9 to 449.8 in one step, where its derivatives
+# overflow.
 LOG_STEP = math.log(100.0)
 
 
