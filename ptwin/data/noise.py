@@ -288,12 +288,12 @@ def baseline_noise(time: np.ndarray, z: np.ndarray, force: np.ndarray, block: in
         return None
     start = settled(force, block)
     start += level_settled(z[start:], force[start:], block)
-    noise = _detrended(z[start:], force[start:])
+    noise, tilt = _line_removed(z[start:], force[start:])
     if not np.any(noise):
         return None
     step = float(np.median(np.diff(time)))
     spacing = float(np.median(np.diff(z[start:])))
-    slope = BaselineSlope(float(np.polyfit(z[start:], force[start:], 1)[0]), spacing, spacing / step)
+    slope = BaselineSlope(tilt, spacing, spacing / step)
     model = _from_records([noise], block, step, BASELINE)
     return replace(model, unsettled=start, slope=slope)
 
@@ -369,9 +369,14 @@ def residual_noise(
 
 def _detrended(z: np.ndarray, force: np.ndarray) -> np.ndarray:
     """The force with its least-squares line in z removed [N]."""
+    return _line_removed(z, force)[0]
+
+
+def _line_removed(z: np.ndarray, force: np.ndarray) -> tuple[np.ndarray, float]:
+    """(the force with its least-squares line in z removed [N], that line's slope [N/m])."""
     design = np.column_stack([np.ones_like(z), z - z.mean()])
     coefficients, *_ = np.linalg.lstsq(design, force, rcond=None)
-    return force - design @ coefficients
+    return force - design @ coefficients, float(coefficients[1])
 
 
 def robust_std(values: np.ndarray) -> float:
