@@ -11,6 +11,7 @@ from ptwin.data.kinematics import (
     UNRESOLVED_FALSE_ALARM,
     contact_radius,
     curve_kinematics,
+    segmented_derivative,
     smoothed_derivative,
     unresolved_motion,
 )
@@ -36,6 +37,19 @@ def test_smoothed_derivative_is_exact_on_lines_and_on_uniformly_sampled_quadrati
     interior = slice(60, -60)
     derivative = smoothed_derivative(time, 3e-6 * time + 2e-6 * time**2, 101)
     assert derivative[interior] == pytest.approx((3e-6 + 4e-6 * time)[interior], rel=1e-8)
+
+
+def test_the_velocity_bends_at_contact_without_the_free_travel_averaged_in():
+    # The tip moves with the base until contact, then at half the speed: each side's velocity is exact to the
+    # sample next to contact, where a window across it blends the two.
+    time = np.linspace(0.0, 1.0, 2001)
+    z = 3e-6 * time - 1.5e-6
+    depth = np.where(z < 0, z, 0.5 * z)
+    approach = np.zeros(time.size, dtype=np.int64)
+    velocity = segmented_derivative(time, depth, 101, approach, z >= 0)
+    assert velocity == pytest.approx(np.where(z < 0, 3e-6, 1.5e-6), rel=1e-8)
+    blended = segmented_derivative(time, depth, 101, approach)
+    assert np.abs(blended / np.where(z < 0, 3e-6, 1.5e-6) - 1).max() > 0.3
 
 
 def test_smoothed_derivative_beats_finite_differences_on_noise():

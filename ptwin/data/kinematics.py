@@ -4,7 +4,8 @@
 - ``U = dw/dt`` by local linear regression over a centred window of ``smoothing``
   (fraction of the approach's samples, ≈5%): a raw finite difference (paper eq. 7) turns
   force noise σ/k_s into a velocity noise ~σ/(k_s Δt) that invents rate effects. Windows
-  stay within a segment (approach, hold, retract), so the ramp/hold corner is not smeared
+  stay within a segment (approach, hold, retract) and on one side of the contact point, so neither the
+  ramp/hold corner nor the bend at contact is smeared
   (one-sided at a segment's ends: a window shrunk to a few samples there would carry that
   velocity noise into the Darcy force, several noise std at a fast curve's deepest samples).
   Every sample of a hold is fitted, its first milliseconds too (a pore pressure draining in
@@ -112,11 +113,20 @@ def window_line(x: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray, at
     return value, slope
 
 
-def segmented_derivative(time: np.ndarray, values: np.ndarray, window: int, segment: np.ndarray) -> np.ndarray:
+def segmented_derivative(
+    time: np.ndarray, values: np.ndarray, window: int, segment: np.ndarray, touching: np.ndarray | None = None
+) -> np.ndarray:
     """``smoothed_derivative`` within each run of equal ``segment`` codes, never across two; after the
-    approach (a hold, a creep) with windows that grow with the time since the segment began."""
+    approach (a hold, a creep) with windows that grow with the time since the segment began. ``touching``
+    (bool, optional): the samples at or past the contact point, where the runs are split too.
+
+    At contact the tip's velocity bends as a segment's corner does: before it the tip moves with the base, after
+    it the rate forces grow from zero (a viscosity's as √w) and hold it back. A window across the contact averaged
+    the free travel into the first samples of contact: on a soft cantilever with 25 Pa·s concealed (known
+    contacts, white noise) K came out 6.0% high beside a contact offset named, 0.58% with a window of 2%."""
     result = np.empty_like(values)
-    edges = np.flatnonzero(np.r_[True, segment[1:] != segment[:-1], True])
+    runs = segment if touching is None else 2 * segment + touching
+    edges = np.flatnonzero(np.r_[True, runs[1:] != runs[:-1], True])
     for lo, hi in zip(edges[:-1], edges[1:]):
         if hi - lo >= 2:
             growing = segment[lo] != APPROACH
@@ -214,7 +224,7 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
                 force=force,
                 depth=depth,
                 contact_radius=contact_radius(depth, meta.probe_radius),
-                velocity=segmented_derivative(time, depth, window, segment),
+                velocity=segmented_derivative(time, depth, window, segment, z >= 0),
                 height=meta.sample_thickness - depth,
                 in_contact=(z >= 0) & (depth > 0) & (segment != RETRACT),
                 segment=segment,
