@@ -16,9 +16,10 @@ from ptwin.data.kinematics import (
     unresolved_motion,
 )
 from ptwin.data.noise import second_difference_std
-from ptwin.data.recordings import load_recordings
+from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.fitting.split import split_samples
 from ptwin.physics.samples import Samples
+from ptwin.synth.simulator import Experiment, simulate
 from tests.conftest import simulated_set
 
 
@@ -50,6 +51,18 @@ def test_the_velocity_bends_at_contact_without_the_free_travel_averaged_in():
     assert velocity == pytest.approx(np.where(z < 0, 3e-6, 1.5e-6), rel=1e-8)
     blended = segmented_derivative(time, depth, 101, approach)
     assert np.abs(blended / np.where(z < 0, 3e-6, 1.5e-6) - 1).max() > 0.3
+
+
+def test_a_height_that_crosses_the_contact_back_and_forth_splits_the_velocity_once(tmp_path):
+    meta, curves = simulate(Experiment(base_speeds=(2e-6,), samples=400, z_start=-0.5e-6))
+    write_recordings(tmp_path / "recorded", meta, curves)
+    z = curves["z"].to_numpy().copy()
+    first = int(np.argmax(z >= 0))
+    z[first - 2 : first + 2] *= -1  # a measured height's noise across the contact: runs of two samples either side
+    curves["z"] = z
+    write_recordings(tmp_path / "jittered", meta, curves)
+    recorded, jittered = (curve_kinematics(load_recordings(tmp_path / f))[0] for f in ("recorded", "jittered"))
+    assert np.abs(jittered.velocity / recorded.velocity - 1).max() < 0.5  # no run of a sample or two: slope nil
 
 
 def test_smoothed_derivative_beats_finite_differences_on_noise():

@@ -118,7 +118,9 @@ def segmented_derivative(
 ) -> np.ndarray:
     """``smoothed_derivative`` within each run of equal ``segment`` codes, never across two; after the
     approach (a hold, a creep) with windows that grow with the time since the segment began. ``touching``
-    (bool, optional): the samples at or past the contact point, where the runs are split too.
+    (bool, optional): the samples from the contact point on, where the runs are split too (once: a recorded
+    height whose noise crosses the contact back and forth would cut runs of a sample or two, whose slopes are
+    noise or nil).
 
     At contact the tip's velocity bends as a segment's corner does: before it the tip moves with the base, after
     it the rate forces grow from zero (a viscosity's as √w) and hold it back. A window across the contact averaged
@@ -224,7 +226,7 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
                 force=force,
                 depth=depth,
                 contact_radius=contact_radius(depth, meta.probe_radius),
-                velocity=segmented_derivative(time, depth, window, segment, z >= 0),
+                velocity=segmented_derivative(time, depth, window, segment, np.maximum.accumulate(z >= 0)),
                 height=meta.sample_thickness - depth,
                 in_contact=(z >= 0) & (depth > 0) & (segment != RETRACT),
                 segment=segment,
