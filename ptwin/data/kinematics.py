@@ -4,8 +4,8 @@
 - ``U = dw/dt`` by local linear regression over a centred window of ``smoothing``
   (fraction of the approach's samples, ≈5%): a raw finite difference (paper eq. 7) turns
   force noise σ/k_s into a velocity noise ~σ/(k_s Δt) that invents rate effects. Windows
-  stay within a segment (approach, hold, retract) and on one side of the contact point, so neither the
-  ramp/hold corner nor the bend at contact is smeared
+  stay within a segment (approach, hold, retract) and, where the contact is known, on one side of it, so
+  neither the ramp/hold corner nor the bend at contact is smeared
   (one-sided at a segment's ends: a window shrunk to a few samples there would carry that
   velocity noise into the Darcy force, several noise std at a fast curve's deepest samples).
   Every sample of a hold is fitted, its first milliseconds too (a pore pressure draining in
@@ -208,6 +208,9 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
             z, force = baseline.remove(z, force)
         depth = z - force / meta.spring_constant
         window = max(5, int(round(smoothing * approach.sum())))  # the approach's: a long hold would widen it
+        # Where the contact is known the velocity bends there; an estimate is refined in the fits (its nuisance),
+        # so the bend lies anywhere within the estimate's reach and a window split at the estimate buys nothing
+        touching = np.maximum.accumulate(z >= 0) if meta.contact_point == "known" else None
         pre_contact = (z < 0) & approach
         free = approach & (z <= PINNING_TRAVEL * min(z[0], 0.0))
         noise = curve_noise(time, z, force, free, block)
@@ -226,7 +229,7 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
                 force=force,
                 depth=depth,
                 contact_radius=contact_radius(depth, meta.probe_radius),
-                velocity=segmented_derivative(time, depth, window, segment, np.maximum.accumulate(z >= 0)),
+                velocity=segmented_derivative(time, depth, window, segment, touching),
                 height=meta.sample_thickness - depth,
                 in_contact=(z >= 0) & (depth > 0) & (segment != RETRACT),
                 segment=segment,
