@@ -4,8 +4,8 @@
 - ``U = dw/dt`` by local linear regression over a centred window of ``smoothing``
   (fraction of the approach's samples, ≈5%): a raw finite difference (paper eq. 7) turns
   force noise σ/k_s into a velocity noise ~σ/(k_s Δt) that invents rate effects. Windows
-  stay within a segment (approach, hold, retract) and, where the contact is known, on one side of it, so
-  neither the ramp/hold corner nor the bend at contact is smeared
+  stay within a segment (approach, hold, retract) and on one side of the contact, growing from it as from a
+  segment's start, so neither the ramp/hold corner nor the bend at contact is smeared
   (one-sided at a segment's ends: a window shrunk to a few samples there would carry that
   velocity noise into the Darcy force, several noise std at a fast curve's deepest samples).
   Every sample of a hold is fitted, its first milliseconds too (a pore pressure draining in
@@ -48,6 +48,11 @@ from ptwin.data.tails import normal_exceeded
 PINNING_TRAVEL = 0.25  # the last fraction of an approach's free travel, fitted with an estimated contact
 BENDING_WINDOW = 15  # samples a motion's bending is read over: a stop's few marked samples are outvoted in it
 UNRESOLVED_FALSE_ALARM = 0.01  # samples of a curve that noise alone marks unresolved, expected
+# A velocity window growing from the contact reaches at least this fraction of the full one's half-width either
+# side: a measured height's noise (real JPK heights scatter 0.1 nm against steps of 1 nm) puts 7% of the velocity
+# into a line through three samples, 0.6% into one through 15 (a 75-sample window's tenth), and the bend's bias
+# barely grows (``segmented_derivative``; a √w bend in ``tests/test_kinematics.py``: 0.08% of the speed, 0.18%).
+CONTACT_WINDOW = 10
 
 
 @dataclass
@@ -117,34 +122,41 @@ def segmented_derivative(
     time: np.ndarray, values: np.ndarray, window: int, segment: np.ndarray, touching: np.ndarray | None = None
 ) -> np.ndarray:
     """``smoothed_derivative`` within each run of equal ``segment`` codes, never across two; after the
-    approach (a hold, a creep) with windows that grow with the time since the segment began. ``touching``
-    (bool, optional): the samples from the contact point on, where the runs are split too (once: a recorded
-    height whose noise crosses the contact back and forth would cut runs of a sample or two, whose slopes are
-    noise or nil).
+    approach (a hold, a creep) and in contact with windows that grow with the time since the run began.
+    ``touching`` (bool, optional): the samples from the contact point on, where the runs are split too (once: a
+    recorded height whose noise crosses the contact back and forth would cut runs of a sample or two, whose
+    slopes are noise or nil).
 
     At contact the tip's velocity bends as a segment's corner does: before it the tip moves with the base, after
-    it the rate forces grow from zero (a viscosity's as √w) and hold it back. A window across the contact averaged
-    the free travel into the first samples of contact: on a soft cantilever with 25 Pa·s concealed (known
-    contacts, white noise) K came out 6.0% high beside a contact offset named; split there, 2.1% with the
-    viscosity alone, the rest the window's own bias where the velocity bends (0.58% with a window of 2%)."""
+    it the rate forces grow from zero (a viscosity's as √w, so steepest at contact) and hold it back. A window
+    across the contact averaged the free travel into the first samples of contact: on a soft cantilever with 25
+    Pa·s concealed (known contacts, white noise) K came out 6.0% high beside a contact offset named; split
+    there, 2.1% with the viscosity alone. A full window just past the contact still averages the bend (there,
+    noise-free, the fastest curve's velocity 3.8% high over its first tenth in contact, 5.7% across the contact;
+    growing from a tenth of the window, 0.47%): with the contact estimated, that error moved the refined contact
+    and K with it (real PAAm noise in the shared p05's setting, six seeds: K 2.6–6.1% higher with 25 Pa·s than
+    without; growing, 1.0–4.4%)."""
     result = np.empty_like(values)
     runs = segment if touching is None else 2 * segment + touching
     edges = np.flatnonzero(np.r_[True, runs[1:] != runs[:-1], True])
     for lo, hi in zip(edges[:-1], edges[1:]):
         if hi - lo >= 2:
-            growing = segment[lo] != APPROACH
-            result[lo:hi] = smoothed_derivative(time[lo:hi], values[lo:hi], window, growing)
+            growing = segment[lo] != APPROACH or (touching is not None and bool(touching[lo]))
+            least = 1 if segment[lo] != APPROACH else max(1, window // CONTACT_WINDOW)
+            result[lo:hi] = smoothed_derivative(time[lo:hi], values[lo:hi], window, growing, least)
         else:
             result[lo:hi] = 0.0  # one sample alone in its segment has no slope of its own
     return result
 
 
-def smoothed_derivative(time: np.ndarray, values: np.ndarray, window: int, growing: bool = False) -> np.ndarray:
+def smoothed_derivative(
+    time: np.ndarray, values: np.ndarray, window: int, growing: bool = False, least: int = 1
+) -> np.ndarray:
     """Slope of a least-squares line over a centred window of ``window`` samples.
 
     Works on non-uniform time; the window shrinks (stays centred where possible) at
-    the ends. ``growing``: sample j's window reaches at most j/2 samples either side, so it
-    widens with the time since the first sample (a relaxation is read on a log time axis):
+    the ends. ``growing``: sample j's window reaches at most j/2 samples either side (``least`` at the
+    fewest), so it widens with the time since the first sample (a relaxation is read on a log time axis):
     when the base stops, the tip keeps moving for a millisecond or so while the cantilever
     relaxes (τ = F_D/U over k_s + dF_el/dw), and a full window there smeared that motion, and
     the Darcy force it carries, over tens of milliseconds.
@@ -153,7 +165,7 @@ def smoothed_derivative(time: np.ndarray, values: np.ndarray, window: int, growi
     index = np.arange(n)
     half = np.full(n, max(1, window // 2))
     if growing:
-        half = np.clip(index // 2, 1, half)
+        half = np.clip(index // 2, least, half)
     lo, hi = np.clip(index - half, 0, n - 1), np.clip(index + half, 0, n - 1)
     return window_line(time, values, lo, hi, time)[1]
 
@@ -209,9 +221,12 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
             z, force = baseline.remove(z, force)
         depth = z - force / meta.spring_constant
         window = max(5, int(round(smoothing * approach.sum())))  # the approach's: a long hold would widen it
-        # Where the contact is known the velocity bends there; an estimate is refined in the fits (its nuisance),
-        # so the bend lies anywhere within the estimate's reach and a window split at the estimate buys nothing
-        touching = np.maximum.accumulate(z >= 0) if meta.contact_point == "known" else None
+        # The velocity bends at the contact. Estimated, the Hertz onset puts it early wherever a force grows as
+        # √w (44–88 samples on a soft cantilever with 25 Pa·s), the onset read as Hertz beside a √w force within
+        # 2 samples (10–15 late without such a force, where the bend is mild): the runs split there.
+        touching = None
+        if meta.contact_point == "known" or baseline is not None:
+            touching = np.maximum.accumulate(z >= (0.0 if baseline is None else baseline.root_shift))
         pre_contact = (z < 0) & approach
         free = approach & (z <= PINNING_TRAVEL * min(z[0], 0.0))
         noise = curve_noise(time, z, force, free, block)
