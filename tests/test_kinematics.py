@@ -68,9 +68,9 @@ def test_the_velocity_in_contact_is_read_with_windows_that_grow_from_the_contact
 
 
 def test_an_estimated_contact_splits_the_velocity_where_a_force_growing_as_root_w_begins(tmp_path):
-    # A viscosity's force grows as √w, which the Hertz onset takes for an earlier contact; split there, the
-    # fastest curve's velocity was 7% off over its first tenth in contact, split at the onset read beside a √w
-    # force 1.6%.
+    # A viscosity's force grows as √w, which the Hertz onset takes for an earlier contact. Split nowhere, the
+    # fastest curve's velocity was 7% off over its first tenth in contact; split at the onset read beside a √w
+    # force, 2.4%.
     soft = dict(probe_radius=5e-6, spring_constant=0.09, effective_modulus=2e3, permeability=6e-16)
     experiment = Experiment(
         effects={"solid_viscosity": {"gamma": 25.0}},
