@@ -48,10 +48,11 @@ from ptwin.data.tails import normal_exceeded
 PINNING_TRAVEL = 0.25  # the last fraction of an approach's free travel, fitted with an estimated contact
 BENDING_WINDOW = 15  # samples a motion's bending is read over: a stop's few marked samples are outvoted in it
 UNRESOLVED_FALSE_ALARM = 0.01  # samples of a curve that noise alone marks unresolved, expected
-# A velocity window growing from the contact reaches at least this fraction of the full one's half-width either
-# side: a measured height's noise (real JPK heights scatter 0.1 nm against steps of 1 nm) puts 7% of the velocity
-# into a line through three samples, 0.6% into one through 15 (a 75-sample window's tenth), and the bend's bias
-# barely grows (``segmented_derivative``; a √w bend in ``tests/test_kinematics.py``: 0.08% of the speed, 0.18%).
+# A velocity window growing from the contact reaches at least 1/CONTACT_WINDOW of the full window either side (a
+# fifth of it in all): a measured height's noise (real JPK heights scatter 0.1 nm against steps of 1 nm) puts 7% of
+# the velocity into a line through three samples, 0.6% into one through 15 (a 75-sample window's fifth), and the
+# bend's bias barely grows (``segmented_derivative``; a √w bend in ``tests/test_kinematics.py``: 0.08% of the speed
+# from three samples, 0.18% from 21).
 CONTACT_WINDOW = 10
 
 
@@ -133,7 +134,7 @@ def segmented_derivative(
     Pa·s concealed (known contacts, white noise) K came out 6.0% high beside a contact offset named; split
     there, 2.1% with the viscosity alone. A full window just past the contact still averages the bend (there,
     noise-free, the fastest curve's velocity 3.8% high over its first tenth in contact, 5.7% across the contact;
-    growing from a tenth of the window, 0.47%): with the contact estimated, that error moved the refined contact
+    growing from a fifth of the window, 0.47%): with the contact estimated, that error moved the refined contact
     and K with it (real PAAm noise in the shared p05's setting, six seeds: K 2.6–6.1% higher with 25 Pa·s than
     without; growing, 1.0–4.4%)."""
     result = np.empty_like(values)
