@@ -142,8 +142,9 @@ def segmented_derivative(
     edges = np.flatnonzero(np.r_[True, runs[1:] != runs[:-1], True])
     for lo, hi in zip(edges[:-1], edges[1:]):
         if hi - lo >= 2:
-            growing = segment[lo] != APPROACH or (touching is not None and bool(touching[lo]))
-            least = 1 if segment[lo] != APPROACH else max(1, window // CONTACT_WINDOW)
+            after_corner = segment[lo] != APPROACH
+            growing = after_corner or (touching is not None and bool(touching[lo]))
+            least = 1 if after_corner else max(1, window // CONTACT_WINDOW)
             result[lo:hi] = smoothed_derivative(time[lo:hi], values[lo:hi], window, growing, least)
         else:
             result[lo:hi] = 0.0  # one sample alone in its segment has no slope of its own
@@ -224,10 +225,9 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
         window = max(5, int(round(smoothing * approach.sum())))  # the approach's: a long hold would widen it
         # The velocity bends at the contact. Estimated, the Hertz onset puts it early wherever a force grows as
         # √w (44–88 samples on a soft cantilever with 25 Pa·s), the onset read as Hertz beside a √w force within
-        # 2 samples (10–15 late without such a force, where the bend is mild): the runs split there.
-        touching = None
-        if meta.contact_point == "known" or baseline is not None:
-            touching = np.maximum.accumulate(z >= (0.0 if baseline is None else baseline.root_shift))
+        # 2 samples (10–15 late without such a force, where the bend is mild): the runs split there. (Known, z
+        # counts from the contact and there is no baseline; estimated, every curve has one.)
+        touching = np.maximum.accumulate(z >= (0.0 if baseline is None else baseline.root_shift))
         pre_contact = (z < 0) & approach
         free = approach & (z <= PINNING_TRAVEL * min(z[0], 0.0))
         noise = curve_noise(time, z, force, free, block)
