@@ -50,9 +50,9 @@ BENDING_WINDOW = 15  # samples a motion's bending is read over: a stop's few mar
 UNRESOLVED_FALSE_ALARM = 0.01  # samples of a curve that noise alone marks unresolved, expected
 # A velocity window growing from the contact reaches at least 1/CONTACT_WINDOW of the full window either side (a
 # fifth of it in all): a measured height's noise (real JPK heights scatter 0.1 nm against steps of 1 nm) puts 7% of
-# the velocity into a line through three samples, 0.6% into one through 15 (a 75-sample window's fifth), and the
-# bend's bias barely grows (``segmented_derivative``; a √w bend in ``tests/test_kinematics.py``: 0.08% of the speed
-# from three samples, 0.18% from 21).
+# the velocity into a line through three samples, 0.6% into one through 15 (a 75-sample window's fifth; a slope's
+# std is σ·√(12/(n(n²−1))) per step), and the bend's bias barely grows (``segmented_derivative``; a √w bend in
+# ``tests/test_kinematics.py``: 0.08% of the speed from three samples, 0.18% from 21).
 CONTACT_WINDOW = 10
 
 
