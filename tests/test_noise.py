@@ -378,6 +378,18 @@ def test_baseline_slopes_that_scatter_beyond_the_noise_read_as_a_drift_of_their_
     assert pooled(baselines_of_a_set(rng, (5e-6, 15e-6), 3.0), [1, 1], [1e-3] * 2).drift is None
 
 
+def test_a_noise_std_given_elsewhere_leaves_the_slopes_read_against_their_own_scatter():
+    # A lab's σ 1.5 times the baselines' own (cell noise's short baselines read 0.75 of the bench-sets' σ): the
+    # slopes' errors follow the scatter they were read on, so χ² is what it is without it (read against the σ
+    # given, 2.25 times low), and the drift's variance, in units of the σ given, 2.25 times smaller.
+    rng = np.random.default_rng(12)
+    models = baselines_of_a_set(rng, (2e-6,) * 80, spread=3.0)
+    own = pooled(models, [1] * 80, [1e-3] * 80, 50, 0.01).drift
+    given = [with_std(m, 1.5 * m.std, "noise_std of meta.yaml") for m in models]
+    drift = pooled(given, [1] * 80, [1e-3] * 80, 50, 0.01).drift
+    assert drift.chi_square == pytest.approx(own.chi_square) and drift.share == pytest.approx(own.share / 2.25)
+
+
 def test_the_slope_variance_is_the_quadratic_form_of_the_noise_models_correlation():
     x = np.arange(200) - 99.5
     lags = np.abs(np.subtract.outer(np.arange(200), np.arange(200)))

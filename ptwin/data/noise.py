@@ -79,11 +79,13 @@ _SHARES = np.linspace(-0.5, 1.0, 61)  # c grid (anti-correlated cell noise has c
 @dataclass(frozen=True)
 class BaselineSlope:
     """A curve's baseline slope as recorded: dF/dz [N/m] of the samples its noise was read on (a line removed
-    before added back), their spacing in z [m] and the probe's speed there [m/s]."""
+    before added back), their spacing in z [m], the probe's speed there [m/s] and their own σ about the line [N]
+    (``scatter``: what the slope's error follows, where a σ given elsewhere replaces the model's)."""
 
     value: float
     step: float
     speed: float
+    scatter: float
 
 
 @dataclass(frozen=True)
@@ -293,9 +295,8 @@ def baseline_noise(time: np.ndarray, z: np.ndarray, force: np.ndarray, block: in
         return None
     step = float(np.median(np.diff(time)))
     spacing = float(np.median(np.diff(z[start:])))
-    slope = BaselineSlope(tilt, spacing, spacing / step)
     model = _from_records([noise], block, step, BASELINE)
-    return replace(model, unsettled=start, slope=slope)
+    return replace(model, unsettled=start, slope=BaselineSlope(tilt, spacing, spacing / step, model.std))
 
 
 def settled(force: np.ndarray, block: int = 50) -> int:
@@ -471,10 +472,12 @@ def drift(models: list[NoiseModel], correlation: NoiseModel, step: float, false_
     the gradient of the fluid's drag as the gap closes, which grows with the speed: real PAAm approaches at 5 and
     15 µm/s rose by 1.70e-5 and 3.17e-5 N/m (standard errors 3e-7, 5e-7). So a line in the speed (a level where
     every curve has one speed) is fitted to the slopes, weights w_c the inverse of slope c's variance V_c under
-    the model, and χ² is what it leaves. Where each slope's variance is V_c(1 + s·r_c) (r_c: a unit drift's slope
-    variance over the model's), χ²'s expectation is Σ (1 + s·r_c)(1 − h_c), h_c the fit's leverages: that gives
-    s."""
-    measured = [m for m in models if m.slope is not None and m.slope.step > 0 < m.std and m.blocks >= 4]
+    the model, and χ² is what it leaves. V_c is the baseline's own σ's (``BaselineSlope.scatter``): a σ given in
+    meta.yaml describes the noise as a lab measured it, not the scatter these slopes were read against (cell noise
+    whose short baselines read 0.75 of the σ given, slopes that drifted read as within it). Where each slope's
+    variance is V_c(1 + s·r_c) (r_c: a unit drift's slope variance over the model's, the drift's variance s in units
+    of the curve's σ²), χ²'s expectation is Σ (1 + s·r_c)(1 − h_c), h_c the fit's leverages: that gives s."""
+    measured = [m for m in models if m.slope is not None and m.slope.step > 0 < m.slope.scatter and m.blocks >= 4]
     speeds = np.array([m.slope.speed for m in measured])
     design = np.ones((len(measured), 1))
     if speeds.size and np.ptp(speeds) > 0.01 * speeds.max():
@@ -487,8 +490,11 @@ def drift(models: list[NoiseModel], correlation: NoiseModel, step: float, false_
     # never below white noise's, as κ² never is: a fitted anti-correlation would make noise alone read as drift
     white = [slope_variance(n, 0.0, 0.0) for n in lengths]
     model = np.maximum([slope_variance(n, correlation.share, correlation.memory) for n in lengths], white)
-    unit_drift = np.array([slope_variance(n, 1.0, memory) for n in lengths])
-    root = np.sqrt(np.array([(m.slope.step / m.std) ** 2 for m in measured]) / model)  # √w_c, V_c in (N/m)²
+    # a unit drift of the curve's σ² over the model's slope variance at the baseline's own σ
+    unit_drift = np.array(
+        [slope_variance(n, 1.0, memory) * (m.std / m.slope.scatter) ** 2 for n, m in zip(lengths, measured)]
+    )
+    root = np.sqrt(np.array([(m.slope.step / m.slope.scatter) ** 2 for m in measured]) / model)  # √w_c, V_c in (N/m)²
     scaled = design * root[:, None]
     q, _ = np.linalg.qr(scaled)
     slopes = np.array([m.slope.value for m in measured]) * root
