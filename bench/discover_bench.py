@@ -22,9 +22,10 @@ Four suites of its own, each a table, then the shared development sets (``bench/
 Beside them, not in ``all`` (``--suite seeds``, ~60 diagnoses): the false-alarm rate and the detection rate
 over seeds, on nulls and on sets with a pore relaxation in the bench-sets' p01/p07 setting (their AR(1) noise
 with a white floor, 0.3 µm of baseline, the noise std in meta.yaml), with the block inflation each null's
-diagnosis used beside the one the noise was drawn with. ``--suite real-noise`` (not in ``all``, ~90 diagnoses, the
+diagnosis used beside the one the noise was drawn with. ``--suite real-noise`` (not in ``all``, ~150 diagnoses, the
 public curves of ``$PTWIN_OPEN_DATA`` read): the same rates with real recorded noise in place of the simulator's
-(``bench/real_noise.py``), on nulls in the soft-cantilever setting and on nulls and pore sets in p07's.
+(``bench/real_noise.py``), on nulls in the soft-cantilever setting, on nulls and pore sets in p07's, and on nulls
+and solid relaxations in p04's and p06's.
 ``--seed N`` draws the four suites' noise from another seed (0 gives the tables of record): the same families as
 other recordings of them would be.
 
@@ -121,6 +122,16 @@ SEEDED = {
     "noise_std": 2.5e-10,
     "noise_correlation": math.exp(-1.0 / 20.0),
     "noise_white_share": 0.4,
+}
+# The bench-sets' p04/p06 setting: p07's probe and speeds, contacts estimated from 0.8 µm of baseline, the noise std
+# (what real noise is scaled to) written in meta.yaml.
+ESTIMATED_REAL = {
+    **{key: value for key, value in SEEDED.items() if not key.startswith("noise_")},
+    "z_start": -0.8e-6,
+    "z_end": 2.63e-6,
+    "noise_std": 2.0e-10,
+    "contact_point": "estimate",
+    "contact_error": 1e-7,
 }
 REALISM = [
     Case("null, correlated noise", setting=CORRELATED),
@@ -356,6 +367,7 @@ def run_seeds(overrides: list[str], scratch: Path, count: int) -> None:
 REAL_NOISE = {  # setting: (its experiment, the terms concealed beside the nulls, the noise std in meta.yaml)
     "soft cantilever": (SOFT, {}, False),
     "p07's, 0.3 µm of baseline": (SEEDED, SEEDED_TERM, True),
+    "p04's and p06's, contacts estimated": (ESTIMATED_REAL, {"solid_relaxation": {"g": 0.2, "tau": 0.1}}, True),
 }
 
 
