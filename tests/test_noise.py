@@ -379,7 +379,7 @@ def test_baseline_slopes_that_scatter_beyond_the_noise_read_as_a_drift_of_their_
 
 
 def test_a_noise_std_given_elsewhere_leaves_the_slopes_read_against_their_own_scatter():
-    # A lab's σ 1.5 times the baselines' own (cell noise's short baselines read 0.75 of the bench-sets' σ): the
+    # A lab's σ 1.5 times the baselines' own (three of four cell records read 0.76 of the bench-sets' σ): the
     # slopes' errors follow the scatter they were read on, so χ² is what it is without it (read against the σ
     # given, 2.25 times low), and the drift's variance, in units of the σ given, 2.25 times smaller.
     rng = np.random.default_rng(12)

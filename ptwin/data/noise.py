@@ -473,10 +473,11 @@ def drift(models: list[NoiseModel], correlation: NoiseModel, step: float, false_
     15 µm/s rose by 1.70e-5 and 3.17e-5 N/m (standard errors 3e-7, 5e-7). So a line in the speed (a level where
     every curve has one speed) is fitted to the slopes, weights w_c the inverse of slope c's variance V_c under
     the model, and χ² is what it leaves. V_c is the baseline's own σ's (``BaselineSlope.scatter``): a σ given in
-    meta.yaml describes the noise as a lab measured it, not the scatter these slopes were read against (cell noise
-    whose short baselines read 0.75 of the σ given, slopes that drifted read as within it). Where each slope's
-    variance is V_c(1 + s·r_c) (r_c: a unit drift's slope variance over the model's, the drift's variance s in units
-    of the curve's σ²), χ²'s expectation is Σ (1 + s·r_c)(1 − h_c), h_c the fit's leverages: that gives s."""
+    meta.yaml describes the noise as a lab measured it, not the scatter these slopes were read against (three of
+    four cell records scaled as the bench-sets scale them scatter at 0.76 of the σ given: slopes that drifted read
+    as within it). Where each slope's variance is V_c(1 + s·r_c) (r_c: a unit drift's slope variance over the
+    model's, the drift's variance s in units of the curve's σ²), χ²'s expectation is Σ (1 + s·r_c)(1 − h_c), h_c
+    the fit's leverages: that gives s."""
     measured = [m for m in models if m.slope is not None and m.slope.step > 0 < m.slope.scatter and m.blocks >= 4]
     speeds = np.array([m.slope.speed for m in measured])
     design = np.ones((len(measured), 1))
