@@ -170,8 +170,12 @@ def run_perturbed(overrides: list[str], scratch: Path, only: list[str] | None = 
     return rows
 
 
-def print_sets(rows: list[Graded], title: str = "shared bench-sets") -> None:
-    print(f"\n{title} (independent simulator, real noise where the set says so)")
+def print_sets(
+    rows: list[Graded],
+    title: str = "shared bench-sets",
+    source: str = "independent simulator, real noise where the set says so",
+) -> None:
+    print(f"\n{title} ({source})")
     width = max(34, *(len(r.name) for r in rows))
     print(f"{'set':<{width}s} {'concealed':<48s} {'named (confidence)':<52s} {'K %':>8s} {'gain':>6s} {'s':>5s}")
     for r in rows:

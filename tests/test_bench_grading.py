@@ -2,7 +2,10 @@
 false alarm; where the setting leaves structure no term has (replicates of differing stiffness), it is right. A drag
 concealed where the contact is estimated may be removed with the baselines or named, as the shared p08 names it."""
 
-from bench.discover_bench import Case, verdict
+import pytest
+
+from bench.bench_sets import shared_sets
+from bench.discover_bench import FAMILIES, Case, verdict
 from ptwin.synth.simulator import Experiment
 
 
@@ -31,3 +34,32 @@ def test_a_drag_concealed_beside_estimated_contacts_may_go_with_the_baselines_or
     assert verdict(drag, estimated, diagnosis(False, ("cantilever_drag",)))
     assert not verdict(drag, estimated, diagnosis(False, ("solid_viscosity",)))
     assert not verdict(Case("null, estimated"), estimated, diagnosis(False, ("cantilever_drag",)))
+
+
+def test_the_families_drawn_again_are_their_shared_sets_settings_and_terms():
+    """Each family of ``--suite families`` draws its shared set's probe, cantilever, sample, speeds, contact, noise
+    std and kind of noise, and conceals the set's terms, the set's own magnitude among its sizes; every shared set
+    the simulator can make has a family (p12's adhesion is outside its effects)."""
+    sets = shared_sets(None)
+    if not sets:
+        pytest.skip("the shared bench-sets are not beside the repository (set PTWIN_BENCH_SETS)")
+    truths = {folder.name: truth for folder, truth in sets}
+    assert set(FAMILIES) == set(truths) - {"p12_adhesion_oov"}
+    for name, family in FAMILIES.items():
+        truth, params = truths[name], truths[name]["params"]
+        concealed = truth["effects"] or {}
+        assert all(sorted(effects) == sorted(concealed) for effects in family.effects if effects), name
+        assert not concealed or concealed in family.effects, name
+        e = Experiment(**family.setting)
+        speeds = e.base_speeds or tuple(hold.speed for hold in e.holds)
+        assert (e.probe_radius, e.spring_constant, e.sample_thickness) == (
+            params["probe_radius"],
+            params["spring_constant_true"],
+            params["sample_thickness"],
+        ), name
+        assert (e.permeability, e.effective_modulus, e.noise_std) == (truth["K"], truth["Estar"], truth["noise_std"])
+        assert list(speeds) == params["speeds"], name
+        assert e.contact_point == truth["realism"]["contact_point"], name
+        real = isinstance(truth["realism"]["noise_model"], dict) and truth["realism"]["noise_model"]["kind"] == "bank"
+        assert bool(family.materials) == real, name
+        assert family.k_tol == truth["expect"].get("k_tol", 0.05), name
