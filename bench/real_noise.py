@@ -65,16 +65,32 @@ def approach_noise(curves: pd.DataFrame) -> list[np.ndarray]:
 
 def with_real_noise(experiment: Experiment, records: list[np.ndarray]) -> tuple:
     """(meta, curves) of ``experiment`` simulated without noise, each curve given a window of one of ``records``
-    (one long enough, drawn by the experiment's seed) scaled by its noise std over ``RECORDED_STD``."""
+    (drawn by the experiment's seed: a record with room for it, then a start there) scaled by its noise std over
+    ``RECORDED_STD``. No two curves share a sample of a record: real curves are recorded one after another, and
+    two windows of the same stretch would give two curves one noise (p06's setting drew overlapping windows for
+    about half its sets on the cells' four records)."""
     rng = np.random.default_rng([experiment.seed, 7])
     meta, curves = simulate(replace(experiment, noise_std=0.0))
+    taken = [np.zeros(record.size, dtype=bool) for record in records]  # the samples given to a curve already
     for curve in curves["curve"].unique():
         rows = (curves["curve"] == curve).to_numpy()
         count = int(rows.sum())
-        long_enough = [r for r in records if r.size >= count]
-        if not long_enough:
-            raise ValueError(f"no noise record holds the {count} samples of curve {curve}: fewer samples a curve")
-        record = long_enough[rng.integers(len(long_enough))]
-        start = rng.integers(record.size - count + 1)
-        curves.loc[rows, "force"] += record[start : start + count] * (experiment.noise_std / RECORDED_STD)
+        starts = [_free_starts(used, count) for used in taken]
+        room = [i for i, free in enumerate(starts) if free.size]
+        if not room:
+            raise ValueError(
+                f"no noise record has {count} samples left for curve {curve} beside the other curves' windows: "
+                "fewer samples a curve"
+            )
+        chosen = room[rng.integers(len(room))]
+        start = int(starts[chosen][rng.integers(starts[chosen].size)])
+        taken[chosen][start : start + count] = True
+        curves.loc[rows, "force"] += records[chosen][start : start + count] * (experiment.noise_std / RECORDED_STD)
     return meta, curves
+
+
+def _free_starts(used: np.ndarray, count: int) -> np.ndarray:
+    """The starts of the windows of ``count`` samples that hold no ``used`` sample."""
+    if used.size < count:
+        return np.empty(0, dtype=np.int64)
+    return np.flatnonzero(np.convolve(used, np.ones(count, dtype=int), mode="valid") == 0)
