@@ -582,15 +582,26 @@ def print_loop(rows: list[tuple]) -> None:
     print(f"{sum(r[-1] == 'right' for r in rows)}/{len(rows)} loops right")
 
 
+def _positive(text: str) -> int:
+    """A count given on the command line: a whole number ≥ 1 (argparse says which option, and the value, where not)."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of at least 1")
+    return int(text)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     suites = [*SUITES, "bench-sets", "perturbed", "seeds", "real-noise", "families", "all"]
     parser.add_argument("--suite", choices=suites, default="all")
     parser.add_argument(
-        "--seeds", type=int, help="sets of each kind in the seeds and real-noise suites (30), seeds of the families (3)"
+        "--seeds",
+        type=_positive,
+        help="sets of each kind in the seeds and real-noise suites (30), seeds of the families (3)",
     )
     parser.add_argument("--seed", type=int, default=0, help="the noise seed of the four suites' sets (0: the tables)")
-    parser.add_argument("--samples", type=int, default=1000, help="samples per curve (where not set by rate or case)")
+    parser.add_argument(
+        "--samples", type=_positive, default=1000, help="samples per curve (where not set by rate or case)"
+    )
     parser.add_argument("--pgd", default="default", help="PGD preset")
     parser.add_argument("--only", nargs="*", help="run only the cases whose name contains one of these")
     args = parser.parse_args()
