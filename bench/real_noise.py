@@ -34,7 +34,7 @@ SETTLED_TRAVEL, BEFORE_CONTACT = 1.0e-6, 0.3e-6  # [m] real-noise.md's stretch o
 def noise_records() -> dict[str, list[np.ndarray]] | None:
     """Each material's pre-contact noise records [N], or None (said in one line) where the public curves are absent."""
     if not all((OPEN_DATA / folder).is_dir() for folder in MATERIALS.values()):
-        print("real-noise suite skipped: set PTWIN_OPEN_DATA to open_data/ of Jhko725/NeuralConstitutiveEq.jl")
+        print("sets with real noise skipped: set PTWIN_OPEN_DATA to open_data/ of Jhko725/NeuralConstitutiveEq.jl")
         return None
     records = {}
     with tempfile.TemporaryDirectory() as scratch:
