@@ -30,6 +30,7 @@ bench: $(STAMP)
 discover-bench: $(STAMP)
 	$(PY) -m bench.discover_bench
 	$(PY) -m bench.contact_bench
+	$(PY) -m bench.levels_bench
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check ptwin tests bench train.py

@@ -4,10 +4,16 @@ import math
 
 import numpy as np
 import pytest
+import scipy.signal
 
-from ptwin.data.contact import _line_onset, estimate_baseline, levels_with_speed
+from bench.discover_bench import ESTIMATED_REAL
+from bench.real_noise import noise_records, with_real_noise
+from ptwin.data.contact import Baseline, _line_onset, drifted, estimate_baseline, levels_with_speed
+from ptwin.data.kinematics import curve_kinematics
+from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.synth.presets import SOFT_CANTILEVER
 from ptwin.synth.simulator import Experiment, simulate
+from tests.conftest import needs_open_data
 
 
 @pytest.mark.parametrize(("spring_constant", "tilt"), [(0.088, 5e-4), (2.88, 0.0), (0.088, -1e-3)])
@@ -109,6 +115,48 @@ def test_levels_whose_errors_are_read_off_short_baselines_are_judged_on_f_not_on
         for read_on in rejected:
             rejected[read_on] += not levels_with_speed(levels, stds, speeds, read_on).consistent
     assert rejected[math.inf] / 4000 > 0.02 and rejected[error_dof] / 4000 <= 0.01
+
+
+def test_a_drift_widens_a_level_by_what_it_moves_the_line_at_the_contact():
+    # A baseline of 300 samples ending 60 before the contact, unit white noise plus a drift as long as the baseline
+    # (AR(1), φ = e^(−1/300), variance 0.3): over 4000 draws the line's value at the contact scatters as ``drifted``
+    # says, within the sampling error of a std (1.1%); the baseline's own error alone is 4.6 times too small.
+    # Made to fail by reading the drift as white (``correlated_square`` of share 0): its error 4.0 times too small.
+    n, gap, share, memory = 300, 60, 0.3, math.exp(-1.0 / 300.0)
+    travel = -(np.arange(n)[::-1] + gap) * 1e-9  # [m], the contact at 0
+    rng = np.random.default_rng(7)
+    innovations = rng.standard_normal((4000, n)) * math.sqrt(share * (1 - memory**2))
+    innovations[:, 0] = rng.standard_normal(4000) * math.sqrt(share)  # stationary from its first sample
+    noise = rng.standard_normal((4000, n)) + scipy.signal.lfilter([1.0], [1.0, -memory], innovations, axis=1)
+    levels = np.polynomial.polynomial.polyfit(travel, noise.T, 1)[0]  # each line's value at travel 0
+    leverage = 1 / n + travel.mean() ** 2 / np.sum((travel - travel.mean()) ** 2)
+    own = Baseline(0.0, 0.0, 0.0, 0.0, math.sqrt(leverage), line_sums=(n, travel.sum(), np.square(travel).sum()))
+    widened = drifted(own, share, memory)
+    assert widened.level_std**2 == pytest.approx(own.level_std**2 + widened.level_drift**2)
+    assert abs(np.std(levels) / widened.level_std - 1) < 0.04
+    assert np.std(levels) / own.level_std > 4
+    assert drifted(own, 0.0, memory) == own  # no drift: the baseline as it was
+
+
+@needs_open_data("PAAM hydrogel")
+@needs_open_data("Agarose")
+@needs_open_data("Interphase rep 2")
+def test_drag_under_real_drifting_noise_stays_in_the_force(tmp_path):
+    # p06's setting (four speeds, contacts estimated from 0.8 µm of baseline) with a drag of 1e-4 N s/m and windows
+    # of the public cell records scaled to 0.2 nN: read each on its own baseline, the levels (0.145, 0.524, 1.48 and
+    # 6.38 nN for 0.1, 0.4, 1.6 and 6.4 nN of drag, ± 0.023 nN) are not one level plus drag (χ² 25.8 on 2 degrees
+    # of freedom, beyond 20.1), and the drag would go with each curve's own level. With the drift the set's slopes
+    # show (0.30 σ²), each is ± 0.10 nN: one level plus drag (χ² 2.5), which stays in the force. Made to fail by
+    # reading the levels without the drift: the first assertion fails.
+    experiment = Experiment(seed=1, effects={"cantilever_drag": {"b": 1e-4}}, **ESTIMATED_REAL)
+    meta, curves = with_real_noise(experiment, noise_records()["cells"])
+    write_recordings(tmp_path, meta, curves)
+    kinematics = curve_kinematics(load_recordings(tmp_path))
+    baselines = [c.baseline for c in kinematics]
+    assert all(b.common and b.level_drift > 0 for b in baselines)
+    alone = np.sqrt([b.level_std**2 - b.level_drift**2 for b in baselines])
+    levels, speeds = np.array([b.level for b in baselines]), np.array([c.base_speed for c in kinematics])
+    assert not levels_with_speed(levels, alone, speeds).consistent
 
 
 def test_the_onset_read_with_a_root_depth_force_places_the_contact_that_hertz_alone_takes_for_earlier():

@@ -28,7 +28,7 @@ its estimate, and the baseline offset and tilt removed from its force.
    late (Hertz alone: ±1 nm, unbiased), and any onset that is not Hertz's moves it.
 4. The level removed: each curve's own, unless the levels of the set are one common level
    plus drag on the cantilever (o_i = a + b·v_i within their standard errors, themselves read off
-   each baseline's noise, ``levels_with_speed``):
+   each baseline's noise and the drift the set's baseline slopes show, ``drifted``, ``levels_with_speed``):
    then only the common level is removed and the drag stays in the force, where
    ``cantilever_drag`` can be fitted; free per-curve levels would remove it unseen.
 
@@ -48,7 +48,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ptwin.data.noise import fit_correlation, holds_noise, model_inflation, robust_std, settled
+from ptwin.data.noise import correlated_square, fit_correlation, holds_noise, model_inflation, robust_std, settled
 from ptwin.data.tails import chi_square_exceeded, fisher_exceeded, student_t_exceeded
 
 DEPARTURE = 5.0  # robust standard deviations above the first baseline where contact has begun
@@ -73,6 +73,7 @@ class Baseline:
     # (n, Σt, Σt²) of the travel t from the contact [m] of the samples the line was fitted to: its (level, tilt)
     # known to precision [[n, Σt], [Σt, Σt²]]/σ² (white noise), what ``ptwin.fitting.baseline_line`` carries
     line_sums: tuple[float, float, float] | None = None
+    level_drift: float = 0.0  # the part of ``level_std`` the set's drift adds [N] (``drifted``), in quadrature
 
     def with_offset(self, offset: float) -> Baseline:
         """This baseline with the set's common level ``offset`` [N] removed at the contact instead."""
@@ -120,6 +121,32 @@ def estimate_baseline(z: np.ndarray, force: np.ndarray, spring_constant: float) 
     return Baseline(
         float(contact_z), level, float(tilt), level, level_std, dof, onset, root_shift=root_shift, line_sums=sums
     )
+
+
+def drifted(baseline: Baseline, variance: float, memory: float) -> Baseline:
+    """``baseline`` with its level's standard error widened by a drift of ``variance`` [N²] and lag-1 correlation
+    ``memory`` per sample (the set's, ``ptwin.data.noise.Drift``): a noise that wanders over spans as long as the
+    baseline moves its line's value at the contact as a whole, which the baseline's own noise model, read on it
+    with its line removed, does not see. The level is the line's value at the contact, Σ aᵢ·Fᵢ over the baseline's
+    samples (evenly spaced in travel, ``line_sums``), so the drift adds ``variance``·aᵀT_φa (T_ij = φ^|i−j|).
+    The public cell records' noise on four simulated curves with drag (``tests/test_contact.py``): levels 0.145,
+    0.524, 1.48 and 6.38 nN for drag of 0.1, 0.4, 1.6 and 6.4 nN, ± 0.023 nN (the fastest ± 0.18) as the baselines
+    read them, rejected one level plus drag (χ² 25.8 on 2 degrees of freedom, beyond 20.1) and the drag went with
+    each curve's level; the slopes of the same baselines read a drift of 0.30 σ², which makes each ± 0.10 nN (±
+    0.21): χ² 2.5, b 9.75e-5 ± 3.5e-6 N s/m for 1e-4. As it is where there is no drift, no line or no noise (a
+    level known to rounding)."""
+    if variance <= 0.0 or baseline.line_sums is None or not baseline.level_std > 0.0:
+        return baseline
+    count, total, squares = baseline.line_sums
+    n = int(round(count))
+    centre, spread = total / count, squares - total**2 / count
+    if n < 3 or spread <= 0.0:
+        return baseline
+    offsets = np.arange(n) - 0.5 * (n - 1)  # the samples about their middle, one spacing apart
+    spacing = math.sqrt(spread / float(offsets @ offsets))
+    weights = 1.0 / n - centre * spacing * offsets / spread  # the line's value at travel 0 (the contact)
+    added = math.sqrt(variance * correlated_square(weights, 1.0, memory))
+    return replace(baseline, level_std=math.hypot(baseline.level_std, added), level_drift=added)
 
 
 def _level_std(z: np.ndarray, noise: np.ndarray, contact_z: float, scale: float) -> tuple[float, float]:

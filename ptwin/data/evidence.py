@@ -76,6 +76,12 @@ def drag_from_baselines(curves: list[CurveKinematics]) -> str | None:
     listing = ", ".join(
         f"{c.curve} {c.baseline.level * 1e9:.3g} ± {c.baseline.level_std * 1e9:.2g} nN" for c in removed
     )
+    drifting = max(b.level_drift for b in baselines)
+    if drifting > 0:  # the errors listed hold it
+        listing += (
+            f" (each error holds up to {drifting * 1e9:.2g} nN of the drift the baselines' slopes show beyond their "
+            "own noise)"
+        )
     if fit is None:
         return (
             f"Baseline levels {listing}: too few curves and speeds (four curves at three speeds at least) to tell one "

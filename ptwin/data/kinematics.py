@@ -40,8 +40,8 @@ import numpy as np
 import pandas as pd
 from numpy.lib.stride_tricks import sliding_window_view
 
-from ptwin.data.contact import Baseline, NoBaseline, baseline_levels, estimate_baseline
-from ptwin.data.noise import NoiseModel, curve_noise, robust_std, with_std
+from ptwin.data.contact import Baseline, NoBaseline, baseline_levels, drifted, estimate_baseline
+from ptwin.data.noise import NoiseModel, curve_noise, robust_std, set_drift, with_std
 from ptwin.data.recordings import APPROACH, RETRACT, SEGMENTS, RecordingError, RecordingSet
 from ptwin.data.tails import normal_exceeded
 
@@ -213,14 +213,15 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
     meta = recordings.meta
     rows = {curve_id: recordings.curve(curve_id) for curve_id in recordings.curve_ids}
     baselines = _estimated_baselines(recordings, rows) if meta.contact_point == "estimate" else {}
+    # A baseline's noise is read with its own line removed, whichever level the set's removes.
+    noises = {curve_id: _curve_noise(curve, baselines.get(curve_id), meta, block) for curve_id, curve in rows.items()}
+    if baselines:
+        baselines = _levels_removed(baselines, noises, rows, block)
     result = []
     for curve_id, curve in rows.items():
-        time, z, force = (curve[c].to_numpy(dtype=np.float64) for c in ("time", "z", "force"))
-        segment = _segment_codes(curve)
-        approach = segment == APPROACH
         baseline = baselines.get(curve_id)
-        if baseline is not None:
-            z, force = baseline.remove(z, force)
+        time, z, force, segment = _arrays(curve, baseline)
+        approach = segment == APPROACH
         depth = z - force / meta.spring_constant
         window = max(5, int(round(smoothing * approach.sum())))  # the approach's: a long hold would widen it
         # The velocity bends at the contact. Estimated, the Hertz onset puts it early wherever a force grows as
@@ -229,12 +230,7 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
         # counts from the contact and there is no baseline; estimated, every curve has one.)
         touching = np.maximum.accumulate(z >= (0.0 if baseline is None else baseline.root_shift))
         pre_contact = (z < 0) & approach
-        free = approach & (z <= PINNING_TRAVEL * min(z[0], 0.0))
-        noise = curve_noise(time, z, force, free, block)
-        if baseline is not None and noise.slope is not None:  # the set's drift reads slopes as recorded
-            noise = replace(noise, slope=replace(noise.slope, value=noise.slope.value + baseline.tilt))
-        if meta.noise_std:
-            noise = with_std(noise, meta.noise_std, "noise_std of meta.yaml")
+        noise = noises[curve_id]
         offset = baseline.offset if baseline else (float(force[pre_contact].mean()) if pre_contact.any() else None)
         speeds = curve["base_speed"].to_numpy(dtype=np.float64)
         result.append(
@@ -254,12 +250,36 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
                 noise=noise,
                 baseline_offset=offset,
                 baseline=baseline,
-                pins_contact=pre_contact & ~free & (z >= -depth.max()),
+                pins_contact=pre_contact & ~_free(z, segment) & (z >= -depth.max()),
                 # A noise-free curve (a simulation's) gives no scale to judge by: nothing is left out.
                 unresolved=unresolved_motion(time, depth, segment != RETRACT) if noise.std > 0 else None,
             )
         )
     return result
+
+
+def _arrays(curve: pd.DataFrame, baseline: Baseline | None) -> tuple[np.ndarray, ...]:
+    """(time [s], z [m], force [N], segment codes) of a curve's rows, ``baseline`` removed where there is one."""
+    time, z, force = (curve[c].to_numpy(dtype=np.float64) for c in ("time", "z", "force"))
+    if baseline is not None:
+        z, force = baseline.remove(z, force)
+    return time, z, force, _segment_codes(curve)
+
+
+def _free(z: np.ndarray, segment: np.ndarray) -> np.ndarray:
+    """The approach's free travel whose noise is read: all but its last ``PINNING_TRAVEL``, which pins a contact."""
+    return (segment == APPROACH) & (z <= PINNING_TRAVEL * min(z[0], 0.0))
+
+
+def _curve_noise(curve: pd.DataFrame, baseline: Baseline | None, meta, block: int) -> NoiseModel:
+    """A curve's noise model, read on its free travel (``_free``), its σ the one meta.yaml gives where it does."""
+    time, z, force, segment = _arrays(curve, baseline)
+    noise = curve_noise(time, z, force, _free(z, segment), block)
+    if baseline is not None and noise.slope is not None:  # the set's drift reads slopes as recorded
+        noise = replace(noise, slope=replace(noise.slope, value=noise.slope.value + baseline.tilt))
+    if meta.noise_std:
+        noise = with_std(noise, meta.noise_std, "noise_std of meta.yaml")
+    return noise
 
 
 def _segment_codes(rows: pd.DataFrame) -> np.ndarray:
@@ -269,14 +289,33 @@ def _segment_codes(rows: pd.DataFrame) -> np.ndarray:
 
 
 def _estimated_baselines(recordings: RecordingSet, rows: dict[str, pd.DataFrame]) -> dict[str, Baseline]:
-    """Each curve's estimated contact and baseline; where the levels are one common level plus drag that
-    rises with speed beyond their scatter (``LevelsWithSpeed.shows_drag``), only the common level is removed,
-    so the drag stays in the force."""
-    baselines, speeds = {}, []
+    """Each curve's estimated contact and baseline, its own level removed."""
+    baselines = {}
     for curve_id, curve in rows.items():
         approach = _segment_codes(curve) == APPROACH
         z, force = (curve[c].to_numpy(dtype=np.float64)[approach] for c in ("z", "force"))
         baselines[curve_id] = _estimated_baseline(recordings, curve_id, z, force)
+    return baselines
+
+
+def _levels_removed(
+    baselines: dict[str, Baseline], noises: dict[str, NoiseModel], rows: dict[str, pd.DataFrame], block: int
+) -> dict[str, Baseline]:
+    """``baselines`` with the level each curve has removed: only the set's common one where the levels are one
+    common level plus drag that rises with speed beyond their scatter (``LevelsWithSpeed.shows_drag``), so that the
+    drag stays in the force; else each curve's own. Each level's error is its baseline's noise and the drift the
+    set's baseline slopes show, whether or not noise alone could give it (``Drift.estimate``,
+    ``ptwin.data.contact.drifted``): on p06's setting with a drag and the public cell records' noise, the levels were
+    one level plus drag at 4 of 12 seeds read without it, at 10 of 12 with it; the same sets without the drag were
+    taken for drag at 1 of 12 without it and at none with it (``LevelsWithSpeed.shows_drag``)."""
+    models = list(noises.values())
+    steps = [float(np.median(np.diff(curve["time"].to_numpy(dtype=np.float64)))) for curve in rows.values()]
+    found = set_drift(models, steps, block)
+    if found is not None and found.estimate > 0.0:
+        baselines = {c: drifted(b, found.estimate * noises[c].std ** 2, found.memory) for c, b in baselines.items()}
+    speeds = []
+    for curve in rows.values():
+        approach = _segment_codes(curve) == APPROACH
         speeds.append(float(curve["base_speed"].to_numpy()[approach][0]))
     fit = baseline_levels(list(baselines.values()), speeds)
     if fit is None or not fit.shows_drag:

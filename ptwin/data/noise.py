@@ -100,6 +100,10 @@ class Drift:
     share: float
     memory: float
     correlation_time: float
+    # the variance the slopes' scatter gives, beyond noise or not (at least 0): what a level read over the same
+    # span is widened by (``ptwin.data.contact.drifted``), where a drift that noise alone could give is no reason
+    # to take the levels' scatter for offsets
+    estimate: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -465,6 +469,17 @@ def pooled(
     )
 
 
+def set_drift(models: list[NoiseModel], steps: list[float], block: int = 50, false_alarm: float = 0.01) -> Drift | None:
+    """``pooled``'s drift alone, under the correlation the curves' baselines share (``steps`` [s] their sampling
+    steps): what a set's baseline levels are read against (its ``estimate``) before its noise is pooled
+    (``ptwin.data.kinematics``). None where no baseline holds a record of its own."""
+    records = [m.record for m in models if m.record is not None]
+    if not records:
+        return None
+    step = float(np.median(steps))
+    return drift(models, _from_records(records, block, step, BASELINE), step, false_alarm)
+
+
 def drift(models: list[NoiseModel], correlation: NoiseModel, step: float, false_alarm: float) -> Drift | None:
     """What the curves' baseline slopes (``models``' own) say of the noise beyond the baselines' length, under the
     set's ``correlation`` (``Drift``; ``step`` [s] the sampling step); None where the slopes leave no degree of
@@ -503,7 +518,8 @@ def drift(models: list[NoiseModel], correlation: NoiseModel, step: float, false_
     kept = 1.0 - np.sum(q**2, axis=1)
     share = (chi_square - kept.sum()) / float(np.sum(unit_drift / model * kept))
     beyond = chi_square > chi_square_exceeded(false_alarm, dof)
-    return Drift(chi_square, dof, float(share) if beyond else 0.0, memory, correlation_time(memory, step))
+    estimate = max(float(share), 0.0)
+    return Drift(chi_square, dof, estimate if beyond else 0.0, memory, correlation_time(memory, step), estimate)
 
 
 def slope_variance(length: int, share: float, memory: float) -> float:
