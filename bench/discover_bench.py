@@ -27,6 +27,8 @@ public curves of ``$PTWIN_OPEN_DATA`` read): the same rates with real recorded n
 (``bench/real_noise.py``), on nulls in the soft-cantilever setting, on nulls and pore sets in p07's, and on nulls
 and solid relaxations in p04's and p06's. ``--suite families`` (not in ``all``, 25 diagnoses a seed, 3 seeds unless
 ``--seeds`` says): the shared sets' families drawn again by ptwin's simulator (``FAMILIES``), graded by their README.
+``--suite pairs`` (not in ``all``, 10 diagnoses a seed): two terms at once in those families' settings (``PAIRS``),
+graded alike.
 ``--seed N`` draws the four suites' noise from another seed (0 gives the tables of record): the same families as
 other recordings of them would be.
 
@@ -457,13 +459,45 @@ FAMILIES = {
 }
 
 
+def _paired(family: str, *terms: dict) -> Family:
+    """``family``'s setting and noise with the ``terms`` ({term: its parameters}) concealed together."""
+    return replace(FAMILIES[family], effects=({name: p for term in terms for name, p in term.items()},))
+
+
+# Two terms at once in the families' settings (``--suite pairs``): the judged sets vary the combinations too, and the
+# shared ones hold one pair (p09's). Each term at its family's size, or the size its setting shows clearly.
+VISCOSITY, DRAG = {"solid_viscosity": {"gamma": 12.0}}, {"cantilever_drag": {"b": 1e-4}}
+RELAXATION, PERMEABILITY = {"solid_relaxation": {"g": 0.2, "tau": 0.1}}, {"strain_dependent_permeability": {"m": 2.5}}
+PAIRS = {
+    "p09 viscosity + drag": _paired("p09_visc_kperm_pair", VISCOSITY, DRAG),
+    "p09 relaxation + viscosity": _paired("p09_visc_kperm_pair", RELAXATION, VISCOSITY),
+    "p07 pore + viscosity": _paired("p07_pore_ar_short_baseline", {"pore_pressure_relaxation": {"M": 5e4}}, VISCOSITY),
+    "p07 pore + strain K": _paired(
+        "p07_pore_ar_short_baseline", {"pore_pressure_relaxation": {"M": 5e4}}, PERMEABILITY
+    ),
+    "p10 power law + pore": _paired(
+        "p10_power_law_holds", {"power_law_rheology": {"alpha": 0.08}}, {"pore_pressure_relaxation": {"M": 2e4}}
+    ),
+    "p10 relaxation + pore": _paired("p10_power_law_holds", RELAXATION, {"pore_pressure_relaxation": {"M": 2e4}}),
+    "p11 pore + relaxation": _paired("p11_pore_holds_real_noise", {"pore_pressure_relaxation": {"M": 2e4}}, RELAXATION),
+    "p06 relaxation + drag": _paired("p06_relax_real_correlated_noise", RELAXATION, DRAG),
+    "p08 drag + strain K": _paired("p08_drag_estimate", DRAG, PERMEABILITY),
+    "p01 strain K + relaxation": _paired("p01_null_ar_meta_noise", PERMEABILITY, RELAXATION),
+}
+
+
 def run_families(
-    overrides: list[str], scratch: Path, count: int, only: list[str] | None = None
+    overrides: list[str],
+    scratch: Path,
+    count: int,
+    only: list[str] | None = None,
+    families: dict[str, Family] = FAMILIES,
+    suite: str = "families",
 ) -> tuple[list[Graded], list[bool]]:
-    """Each of ``FAMILIES`` (whose name holds one of ``only``: all without it) at seeds 1 to ``count``, graded as the
-    shared sets are, a line printed as each finishes, and whether K's 95% interval holds the truth in each; the
-    families of real noise skipped (said in one line) without the public records."""
-    chosen = {name: f for name, f in FAMILIES.items() if not only or any(word in name for word in only)}
+    """Each of ``families`` (whose name holds one of ``only``: all without it) at seeds 1 to ``count``, graded as
+    the shared sets are, a line printed as each finishes (headed ``suite``), and whether K's 95% interval holds the
+    truth in each; the families of real noise skipped (said in one line) without the public records."""
+    chosen = {name: f for name, f in families.items() if not only or any(word in name for word in only)}
     records = noise_records() if any(f.materials for f in chosen.values()) else {}  # read only where one needs them
     rows, held = [], []
     for name, family in chosen.items():
@@ -482,7 +516,7 @@ def run_families(
                 truth = {"expect": {**expect, "k_tol": family.k_tol}, "K": experiment.permeability, "effects": effects}
                 rows.append(graded(label, truth, d, seconds))
                 held.append(holds(d["permeability"]["corrected_interval"], experiment.permeability))
-                print(f"families: {rows[-1].line()}{'' if held[-1] else ' [K interval misses the truth]'}", flush=True)
+                print(f"{suite}: {rows[-1].line()}{'' if held[-1] else ' [K interval misses the truth]'}", flush=True)
     return rows, held
 
 
@@ -592,12 +626,12 @@ def _positive(text: str) -> int:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    suites = [*SUITES, "bench-sets", "perturbed", "seeds", "real-noise", "families", "all"]
+    suites = [*SUITES, "bench-sets", "perturbed", "seeds", "real-noise", "families", "pairs", "all"]
     parser.add_argument("--suite", choices=suites, default="all")
     parser.add_argument(
         "--seeds",
         type=_positive,
-        help="sets of each kind in the seeds and real-noise suites (30), seeds of the families (3)",
+        help="sets of each kind in the seeds and real-noise suites (30), seeds of the families and pairs (3)",
     )
     parser.add_argument("--seed", type=int, default=0, help="the noise seed of the four suites' sets (0: the tables)")
     parser.add_argument(
@@ -652,14 +686,15 @@ def main() -> None:
     if args.suite == "real-noise":  # not in "all": ~150 diagnoses, and the public curves it reads
         with tempfile.TemporaryDirectory() as scratch:
             run_real_noise([*overrides, "diagnosis.design=false"], Path(scratch), args.seeds or 30)
-    if args.suite == "families":  # not in "all": 25 diagnoses a seed, the public curves read
+    if args.suite in ("families", "pairs"):  # not in "all": 25 (10) diagnoses a seed, the public curves read
+        families = FAMILIES if args.suite == "families" else PAIRS
         with tempfile.TemporaryDirectory() as scratch:
             drawn, held = run_families(
-                [*overrides, "diagnosis.design=false"], Path(scratch), args.seeds or 3, args.only
+                [*overrides, "diagnosis.design=false"], Path(scratch), args.seeds or 3, args.only, families, args.suite
             )
         if drawn:  # none where every family asked for needs the public records and they are absent (said above)
-            title = "the shared bench-sets' families drawn again"
-            print_sets(drawn, title, "ptwin's simulator, real noise where the set has it")
+            title = {"families": "the shared bench-sets' families drawn again", "pairs": "two terms at once"}
+            print_sets(drawn, title[args.suite], "ptwin's simulator, real noise where the set has it")
             print(f"K's 95% interval holds the truth at {sum(held)}/{len(held)} sets (a side left open holds it)")
     if args.suite == "perturbed":  # not in "all": a robustness check of ~35 diagnoses
         with tempfile.TemporaryDirectory() as scratch:

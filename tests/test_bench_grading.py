@@ -5,7 +5,7 @@ concealed where the contact is estimated may be removed with the baselines or na
 import pytest
 
 from bench.bench_sets import shared_sets
-from bench.discover_bench import FAMILIES, Case, verdict
+from bench.discover_bench import FAMILIES, PAIRS, Case, verdict
 from ptwin.synth.simulator import Experiment
 
 
@@ -63,3 +63,12 @@ def test_the_families_drawn_again_are_their_shared_sets_settings_and_terms():
         real = isinstance(truth["realism"]["noise_model"], dict) and truth["realism"]["noise_model"]["kind"] == "bank"
         assert bool(family.materials) == real, name
         assert family.k_tol == truth["expect"].get("k_tol", 0.05), name
+
+
+def test_each_pair_is_two_terms_of_the_simulator_in_a_familys_setting_and_noise():
+    settings = [(family.setting, family.materials, family.k_tol) for family in FAMILIES.values()]
+    for name, pair in PAIRS.items():
+        (effects,) = pair.effects
+        assert len(effects) == 2, name
+        assert (pair.setting, pair.materials, pair.k_tol) in settings, name
+        Experiment(effects=effects, **pair.setting)  # refuses a term or parameter the simulator lacks
