@@ -79,8 +79,8 @@ def drag_from_baselines(curves: list[CurveKinematics]) -> str | None:
     drifting = max(b.level_drift for b in baselines)
     if drifting > 0:  # the errors listed hold it
         listing += (
-            f" (each error holds up to {drifting * 1e9:.2g} nN of the drift the baselines' slopes show beyond their "
-            "own noise)"
+            f" (each error holds up to {drifting * 1e9:.2g} nN for the drift the baselines' slopes show, which their "
+            "own noise, read with their lines removed, does not)"
         )
     if fit is None:
         return (
