@@ -19,20 +19,25 @@ from pathlib import Path
 
 from bench.discover_bench import ESTIMATED_REAL, _positive
 from bench.real_noise import noise_records, with_real_noise
-from ptwin.data.kinematics import curve_kinematics
+from ptwin.data.kinematics import CurveKinematics, curve_kinematics
 from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.synth.simulator import Experiment
 
 DRAG = 1e-4  # [N s/m] p08's
 
 
-def common_level(records: list, seed: int, drag: float, folder: Path) -> bool:
-    """Whether the set of ``seed`` (``drag`` [N s/m] concealed, noise windows of ``records``) has only its common
-    level removed: its levels read as one level plus a drag."""
+def kinematics(records: list, seed: int, drag: float, folder: Path) -> list[CurveKinematics]:
+    """The curves of the set of ``seed`` (``drag`` [N s/m] concealed, noise windows of ``records``), written to
+    ``folder`` and read back, their baselines estimated."""
     effects = {"cantilever_drag": {"b": drag}} if drag else {}
     meta, curves = with_real_noise(Experiment(seed=seed, effects=effects, **ESTIMATED_REAL), records)
     write_recordings(folder, meta, curves)
-    return all(curve.baseline.common for curve in curve_kinematics(load_recordings(folder)))
+    return curve_kinematics(load_recordings(folder))
+
+
+def common_level(records: list, seed: int, drag: float, folder: Path) -> bool:
+    """Whether that set has only its common level removed: its levels read as one level plus a drag."""
+    return all(curve.baseline.common for curve in kinematics(records, seed, drag, folder))
 
 
 def main() -> None:

@@ -6,11 +6,9 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from bench.discover_bench import ESTIMATED_REAL
-from bench.real_noise import noise_records, with_real_noise
+from bench.levels_bench import kinematics
+from bench.real_noise import noise_records
 from ptwin.data.contact import Baseline, _line_onset, drifted, estimate_baseline, levels_with_speed
-from ptwin.data.kinematics import curve_kinematics
-from ptwin.data.recordings import load_recordings, write_recordings
 from ptwin.synth.presets import SOFT_CANTILEVER
 from ptwin.synth.simulator import Experiment, simulate
 from tests.conftest import needs_open_data
@@ -148,14 +146,11 @@ def test_drag_under_real_drifting_noise_stays_in_the_force(tmp_path):
     # of freedom, beyond 20.1), and the drag would go with each curve's own level. With the drift the set's slopes
     # show (0.30 σ²), each is ± 0.10 nN: one level plus drag (χ² 2.5), which stays in the force. Made to fail by
     # reading the levels without the drift: the first assertion fails.
-    experiment = Experiment(seed=1, effects={"cantilever_drag": {"b": 1e-4}}, **ESTIMATED_REAL)
-    meta, curves = with_real_noise(experiment, noise_records()["cells"])
-    write_recordings(tmp_path, meta, curves)
-    kinematics = curve_kinematics(load_recordings(tmp_path))
-    baselines = [c.baseline for c in kinematics]
+    curves = kinematics(noise_records()["cells"], 1, 1e-4, tmp_path)
+    baselines = [c.baseline for c in curves]
     assert all(b.common and b.level_drift > 0 for b in baselines)
     alone = np.sqrt([b.level_std**2 - b.level_drift**2 for b in baselines])
-    levels, speeds = np.array([b.level for b in baselines]), np.array([c.base_speed for c in kinematics])
+    levels, speeds = np.array([b.level for b in baselines]), np.array([c.base_speed for c in curves])
     assert not levels_with_speed(levels, alone, speeds).consistent
 
 

@@ -42,7 +42,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from ptwin.data.contact import Baseline, NoBaseline, baseline_levels, drifted, estimate_baseline
 from ptwin.data.noise import NoiseModel, curve_noise, robust_std, set_drift, with_std
-from ptwin.data.recordings import APPROACH, RETRACT, SEGMENTS, RecordingError, RecordingSet
+from ptwin.data.recordings import APPROACH, RETRACT, SEGMENTS, Meta, RecordingError, RecordingSet
 from ptwin.data.tails import normal_exceeded
 
 PINNING_TRAVEL = 0.25  # the last fraction of an approach's free travel, fitted with an estimated contact
@@ -212,11 +212,11 @@ def curve_kinematics(recordings: RecordingSet, smoothing: float = 0.05, block: i
     of the noise model's variance inflation (the whiteness test's)."""
     meta = recordings.meta
     rows = {curve_id: recordings.curve(curve_id) for curve_id in recordings.curve_ids}
-    baselines = _estimated_baselines(recordings, rows) if meta.contact_point == "estimate" else {}
+    baselines, speeds = _estimated_baselines(recordings, rows) if meta.contact_point == "estimate" else ({}, [])
     # A baseline's noise is read with its own line removed, whichever level the set's removes.
     noises = {curve_id: _curve_noise(curve, baselines.get(curve_id), meta, block) for curve_id, curve in rows.items()}
     if baselines:
-        baselines = _levels_removed(baselines, noises, rows, block)
+        baselines = _levels_removed(baselines, speeds, noises, rows, block)
     result = []
     for curve_id, curve in rows.items():
         baseline = baselines.get(curve_id)
@@ -271,7 +271,7 @@ def _free(z: np.ndarray, segment: np.ndarray) -> np.ndarray:
     return (segment == APPROACH) & (z <= PINNING_TRAVEL * min(z[0], 0.0))
 
 
-def _curve_noise(curve: pd.DataFrame, baseline: Baseline | None, meta, block: int) -> NoiseModel:
+def _curve_noise(curve: pd.DataFrame, baseline: Baseline | None, meta: Meta, block: int) -> NoiseModel:
     """A curve's noise model, read on its free travel (``_free``), its σ the one meta.yaml gives where it does."""
     time, z, force, segment = _arrays(curve, baseline)
     noise = curve_noise(time, z, force, _free(z, segment), block)
@@ -288,35 +288,38 @@ def _segment_codes(rows: pd.DataFrame) -> np.ndarray:
     return rows["segment"].map(SEGMENTS.index).to_numpy(dtype=np.int64)
 
 
-def _estimated_baselines(recordings: RecordingSet, rows: dict[str, pd.DataFrame]) -> dict[str, Baseline]:
-    """Each curve's estimated contact and baseline, its own level removed."""
-    baselines = {}
+def _estimated_baselines(
+    recordings: RecordingSet, rows: dict[str, pd.DataFrame]
+) -> tuple[dict[str, Baseline], list[float]]:
+    """Each curve's estimated contact and baseline, its own level removed, and its approach's base speed [m/s]."""
+    baselines, speeds = {}, []
     for curve_id, curve in rows.items():
         approach = _segment_codes(curve) == APPROACH
         z, force = (curve[c].to_numpy(dtype=np.float64)[approach] for c in ("z", "force"))
         baselines[curve_id] = _estimated_baseline(recordings, curve_id, z, force)
-    return baselines
+        speeds.append(float(curve["base_speed"].to_numpy()[approach][0]))
+    return baselines, speeds
 
 
 def _levels_removed(
-    baselines: dict[str, Baseline], noises: dict[str, NoiseModel], rows: dict[str, pd.DataFrame], block: int
+    baselines: dict[str, Baseline],
+    speeds: list[float],
+    noises: dict[str, NoiseModel],
+    rows: dict[str, pd.DataFrame],
+    block: int,
 ) -> dict[str, Baseline]:
-    """``baselines`` with the level each curve has removed: only the set's common one where the levels are one
-    common level plus drag that rises with speed beyond their scatter (``LevelsWithSpeed.shows_drag``), so that the
-    drag stays in the force; else each curve's own. Each level's error is its baseline's noise and the drift the
-    set's baseline slopes show, whether or not noise alone could give it (``Drift.estimate``,
-    ``ptwin.data.contact.drifted``): on p06's setting with a drag and the public cell records' noise, the levels were
-    one level plus drag at 4 of 12 seeds read without it, at 10 of 12 with it; the same sets without the drag were
-    taken for drag at 1 of 12 without it and at none with it (``LevelsWithSpeed.shows_drag``)."""
+    """``baselines`` (their curves' approaches at ``speeds`` [m/s]) with the level each curve has removed: only the
+    set's common one where the levels are one common level plus drag that rises with speed beyond their scatter
+    (``LevelsWithSpeed.shows_drag``), so that the drag stays in the force; else each curve's own. Each level's error
+    is its baseline's noise and the drift the set's baseline slopes show, whether or not noise alone could give it
+    (``Drift.estimate``, ``ptwin.data.contact.drifted``): on p06's setting with a drag and the public cell records'
+    noise, the levels were one level plus drag at 4 of 12 seeds read without it, at 10 of 12 with it; the same sets
+    without the drag were taken for drag at 1 of 12 without it and at none with it (``LevelsWithSpeed.shows_drag``)."""
     models = list(noises.values())
     steps = [float(np.median(np.diff(curve["time"].to_numpy(dtype=np.float64)))) for curve in rows.values()]
     found = set_drift(models, steps, block)
     if found is not None and found.estimate > 0.0:
         baselines = {c: drifted(b, found.estimate * noises[c].std ** 2, found.memory) for c, b in baselines.items()}
-    speeds = []
-    for curve in rows.values():
-        approach = _segment_codes(curve) == APPROACH
-        speeds.append(float(curve["base_speed"].to_numpy()[approach][0]))
     fit = baseline_levels(list(baselines.values()), speeds)
     if fit is None or not fit.shows_drag:
         return baselines
