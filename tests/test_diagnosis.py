@@ -1088,6 +1088,62 @@ def test_structure_terms_would_remove_but_no_rule_keeps_is_said_so_with_the_smal
     assert "No term of the vocabulary explains the residual: the hybrid" in summarise(d, None, ABOVE_FIVE)
 
 
+def test_structure_slower_than_the_noise_was_read_on_is_said_to_be_no_proof_of_a_miss():
+    # p07's setting with the public cells' noise, a null: "unexplained" over 1346 samples of v4, the correlation read on
+    # baselines of at most 115 samples (white); real cell noise wanders over such spans.
+    from dataclasses import replace
+
+    from ptwin.data.noise import NoiseModel
+    from ptwin.diagnosis.locate import Mismatch
+    from ptwin.diagnosis.words import summarise
+
+    d = _named([], unexplained=True)
+    d.where = [Mismatch(curve, 4e-6, 0.0, 2.5e-6, 2.7e-10, 2.6e-10, 18.1, span) for curve, span in SPANS]
+    d.noise = NoiseModel(2.5e-10, 0.0, 1.0, 0.0, "pre-contact baseline", 345, longest=115)
+    sentence = summarise(d, None, ABOVE_FIVE)
+    assert sentence.endswith(
+        "so no interval is given. The noise's correlation was read on records of at most 115 samples, and the "
+        "structure spans 1346 samples of v4: noise that wanders over spans longer than it was read on (real cell "
+        "noise does) would leave such structure too, and these recordings cannot tell the two apart; baselines of "
+        "1346 samples a curve would."
+    )
+    d.noise = replace(d.noise, longest=0)  # σ from second differences: no record measured the correlation
+    assert "The noise's correlation was read on no record of it, and the structure spans 1346" in summarise(
+        d, None, ABOVE_FIVE
+    )
+    d.noise = replace(d.noise, longest=1346)  # a baseline as long as the structure saw noise that slow
+    assert summarise(d, None, ABOVE_FIVE).endswith("so no interval is given.")
+
+
+SPANS = (("v16", 800), ("v4", 1346), ("v64", 300))
+
+
+def test_a_located_range_spans_the_recorded_samples_between_its_first_and_last():
+    # The judged samples are every other one: the range's 200 judged samples span 399 recorded ones.
+    from types import SimpleNamespace
+
+    from ptwin.diagnosis.locate import locate
+
+    curve = torch.arange(2000) // 1000
+    ones = torch.ones(2000, dtype=torch.float64)
+    samples = SimpleNamespace(
+        curve_ids=["v1", "v2"],
+        curve=curve,
+        noise_floor=1e-10 * ones,
+        curve_inflation=ones,
+        depth=1e-9 * (torch.arange(2000) % 1000).double(),
+        base_speed=1e-6 * ones,
+        time=1e-3 * (torch.arange(2000) % 1000).double(),
+    )
+    index = torch.arange(0, 2000, 2)
+    residual = torch.zeros(1000, dtype=torch.float64)
+    residual[150:350] = 1e-9  # recorded samples 300 to 698 of v1, ten noise std
+    test = SimpleNamespace(curve_threshold=lambda curve: 2.0)
+    (found,) = locate(samples, residual, index, 50, test)
+    assert (found.curve, found.span) == ("v1", 399)
+    assert (found.depth_from, found.depth_to) == pytest.approx((3.0e-7, 6.98e-7))
+
+
 @pytest.mark.parametrize(("curves", "verb"), [(["v15"], "v15 disagrees"), (["v5", "v15"], "v5, v15 disagree")])
 def test_where_the_curves_disagree_is_said_in_one_sentence_whatever_their_number(curves, verb):
     # Real PAAm F as recorded, one curve off the base model: "v15 disagree with the base model".

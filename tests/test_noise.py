@@ -24,6 +24,7 @@ from ptwin.data.noise import (
     mean_inflation,
     model_inflation,
     pooled,
+    residual_noise,
     settled,
     slope_variance,
     trend_basis,
@@ -174,6 +175,17 @@ def test_the_set_pools_correlation_from_the_curves_that_measured_it():
     # The curve without a baseline: σ from second differences, corrected for the set's correlation
     # (they read σ·√(1 − φ) of AR(1) noise: ~23% low at φ = 0.4, so the set's σ would be ~6% low).
     assert set_noise.std == pytest.approx(1.3e-11, rel=0.04, abs=0)
+
+
+def test_the_set_says_the_longest_record_its_correlation_was_read_on():
+    # A record sees the noise at scales up to its own length (``words._slower_than_measured`` reads it).
+    lengths = (1200, 600, 300)
+    time, z = np.arange(1200) / 2000.0, np.linspace(-2e-6, -0.5e-6, 1200)
+    measured = [baseline_noise(time[:n], z[:n], ar1(0.4, n, seed=n), 50) for n in lengths]
+    assert pooled(measured, [1, 1, 1], [5e-4] * 3).longest == max(m.record.size for m in measured) > 1100
+    residual = residual_noise([ar1(0.4, n, seed=n) for n in (900, 2500)], 1e-11, 5e-4, 50)
+    assert residual.longest == 2500
+    assert curve_noise(time, z, ar1(0.0, 1200), time < 0.01, 50).longest == 0  # none: second differences
 
 
 def test_a_noise_std_written_in_meta_yaml_replaces_sigma_and_keeps_the_measured_correlation(tmp_path):

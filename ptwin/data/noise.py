@@ -119,6 +119,7 @@ class NoiseModel:
     share: float = 0.0  # c: the AR(1) part's share of the variance
     memory: float = 0.0  # φ: the AR(1) part's lag-1 correlation
     blocks: float = math.inf  # ν: independent block means the correlation rests on (inf: assumed white)
+    longest: int = 0  # samples of the longest record the correlation was read on: it sees no slower noise (0: none)
     record: np.ndarray | None = field(default=None, compare=False, repr=False)  # the detrended baseline [N]
     short: np.ndarray | None = field(default=None, compare=False, repr=False)  # a baseline too short for a model
     unsettled: int = 0  # samples at the start of the baselines left out: not settled (``settled``, ``level_settled``)
@@ -280,6 +281,7 @@ def _from_records(records: list[np.ndarray], block: int, step: float, source: st
         share=share,
         memory=memory,
         blocks=total / block,
+        longest=max(r.size for r in records),
         record=records[0] if len(records) == 1 else None,
     )
 

@@ -33,6 +33,7 @@ class Mismatch:
     rms_residual: float  # [N] over that range
     noise_floor: float  # [N], the RMS of the residual noise std over that range
     whiteness: float  # W of the curve's whole residual
+    span: int = 0  # recorded samples of the curve from the range's first to its last
 
 
 def block_means(scaled: torch.Tensor, block: int) -> torch.Tensor:
@@ -88,6 +89,8 @@ def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block:
             continue
         lo, hi = edges[off.min()].item(), edges[off.max() + 1].item()
         depth, noise = samples.depth[where[lo:hi]], samples.noise_floor[where[lo:hi]]
+        time = samples.time[where[lo:hi]]
+        spanned = (samples.curve == i) & (samples.time >= time.min()) & (samples.time <= time.max())
         found.append(
             Mismatch(
                 curve=curve,
@@ -97,6 +100,7 @@ def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block:
                 rms_residual=(scaled[lo:hi] * noise).square().mean().sqrt().item(),
                 noise_floor=noise.square().mean().sqrt().item(),
                 whiteness=w,
+                span=int(spanned.sum()),
             )
         )
     return found
