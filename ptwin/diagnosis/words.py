@@ -129,11 +129,10 @@ def _slower_than_measured(d) -> str:
     """A sentence where the structure spans more recorded samples than the longest record the noise's correlation
     was read on (``NoiseModel.longest``): noise that wanders over the longer span would leave it too, which these
     recordings cannot rule out; '' where it spans no more. A record sees the noise at scales up to its own length, and
-    real cell noise wanders over the contact:
-    in p07's setting (0.3 µm of baseline) with the public cells' records, baselines of at most 115 samples read it
-    white (κ² 1.0) and 8 of 10 nulls read "unexplained" (one at whiteness 18.1 against 8.0, over 1346 samples of its
-    slowest curve); the same slow structure could be a model's miss, and no rule read off the residual alone tells
-    the two apart (README, ``--suite real-noise``)."""
+    real cell noise wanders over the contact: in p07's setting (0.3 µm of baseline) with the public cells' records,
+    baselines of at most 115 samples read it white (κ² 1.0) and 8 of 10 nulls read "unexplained" (one at whiteness
+    18.1 against 8.0, over 1346 samples of its slowest curve). The same slow structure could be a model's miss, and no
+    rule read off the residual alone tells the two apart (README, ``--suite real-noise``)."""
     if not d.where:
         return ""
     widest = max(d.where, key=lambda m: m.span)
