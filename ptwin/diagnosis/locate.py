@@ -89,8 +89,6 @@ def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block:
             continue
         lo, hi = edges[off.min()].item(), edges[off.max() + 1].item()
         depth, noise = samples.depth[where[lo:hi]], samples.noise_floor[where[lo:hi]]
-        time = samples.time[where[lo:hi]]
-        spanned = (samples.curve == i) & (samples.time >= time.min()) & (samples.time <= time.max())
         found.append(
             Mismatch(
                 curve=curve,
@@ -100,7 +98,7 @@ def locate(samples: Samples, residual: torch.Tensor, index: torch.Tensor, block:
                 rms_residual=(scaled[lo:hi] * noise).square().mean().sqrt().item(),
                 noise_floor=noise.square().mean().sqrt().item(),
                 whiteness=w,
-                span=int(spanned.sum()),
+                span=int(where[hi - 1] - where[lo]) + 1,  # a curve's samples lie together, in time order
             )
         )
     return found
