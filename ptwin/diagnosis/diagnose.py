@@ -175,6 +175,49 @@ class Diagnosis:
         return finite_or_none(payload)
 
 
+@dataclass
+class Weighed:
+    """The candidate subsets fitted and weighed (``weigh``): what ``diagnose`` then says of them."""
+
+    test: StructureTest  # the structure test they were weighed under (``FirstFits.test``)
+    candidates: dict[tuple[str, ...], Candidate]
+    evidence: dict[tuple[str, ...], TermEvidence]  # ``shape_evidence``
+    pick: _Selection
+    held_out: HeldOutTest
+    twin: dict  # the hybrid twin's validation and test RMS (``_twin_rmse``)
+
+
+def weigh(
+    make_model: Callable,
+    samples: Samples,
+    split: Split,
+    hybrid: HybridTwin | None,
+    settings: DiagnosisSettings,
+    iterations: int,
+    noise: NoiseModel,
+    first: FirstFits,
+    progress: Callable[[str], None] = print,
+    fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
+) -> Weighed:
+    """Fit the subsets of candidate terms the diagnosis weighs (``first``'s reused; ``fitted``: fits of others
+    already made on these samples, reused as they are) and select what is named, under the noise model ``noise``;
+    ``hybrid``: the trained hybrid twin, the flexible model a named term is weighed against (None: not trained)."""
+    s, test = settings, first.test
+    seen = split.judged(samples)
+    twin = _twin_rmse(hybrid, samples, split)
+    held_out = _held_out_test(samples, split, seen, test, noise, s)
+    flexible = twin["val_rmse"]
+    weighing = _Weighing(
+        make_model, samples, split, s, iterations, first, progress, flexible, noise.std, held_out, fitted
+    )
+    candidates, evidence, pick = weighing()
+    if pick.unexplained and len(candidates) < _subsets(s):
+        # "Unexplained" says no subset of the vocabulary explains what is left: every one is weighed first (a viscosity
+        # with a strain-dependent K at half p09's values: no single kept, the pair unfitted, 112 BIC below the best).
+        candidates, evidence, pick = weighing(candidates)
+    return Weighed(test, candidates, evidence, pick, held_out, twin)
+
+
 def diagnose(
     make_model: Callable,
     samples: Samples,
@@ -182,31 +225,28 @@ def diagnose(
     hybrid: HybridTwin | None,
     apparent: ApparentPermeability | None,
     settings: DiagnosisSettings,
-    iterations: int,
     noise: NoiseModel,
-    first: FirstFits,
+    weighed: Weighed,
     progress: Callable[[str], None] = print,
     notes: list[str] | None = None,
     design: ExperimentDesign | None = None,
     on_chosen: Callable[[tuple[str, ...], PhysicsFit], None] | None = None,
 ) -> Diagnosis:
-    """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them); candidate fits run
-    ``iterations`` LM steps; ``noise`` is the set's noise model; ``first``: the structure test and the base
-    model and single terms fitted under it (``first_fits``), reused as they are; ``notes``: evidence about the
-    data, in sentences; ``design``: what proposes the next experiment of each confounded group (None: none
-    proposed); ``hybrid``: the trained hybrid twin, whose learned error the named terms are compared with (None:
-    not trained); ``on_chosen``: told the terms chosen and their fit as soon as they are, before their intervals
-    (a run draws the corrected model's figures meanwhile)."""
-    s, test = settings, first.test
+    """Run the diagnosis on the fitted samples of ``samples`` (``split`` over them) of the candidates ``weighed``
+    (``weigh``) under ``noise``, the set's noise model; ``notes``: evidence about the data, in sentences;
+    ``design``: what proposes the next experiment of each confounded group (None: none proposed); ``hybrid``: the
+    trained hybrid twin, whose learned error the named terms are compared with (None: not trained); ``on_chosen``:
+    told the terms chosen and their fit as soon as they are, before their intervals (a run draws the corrected
+    model's figures meanwhile)."""
+    s, test = settings, weighed.test
+    candidates, evidence, pick, held_out, twin = (
+        weighed.candidates,
+        weighed.evidence,
+        weighed.pick,
+        weighed.held_out,
+        weighed.twin,
+    )
     seen = split.judged(samples)
-    twin = _twin_rmse(hybrid, samples, split)
-    held_out = _held_out_test(samples, split, seen, test, noise, s)
-    weigh = _Weighing(make_model, samples, split, s, iterations, first, progress, twin["val_rmse"], noise.std, held_out)
-    candidates, evidence, pick = weigh()
-    if pick.unexplained and len(candidates) < _subsets(s):
-        # "Unexplained" says no subset of the vocabulary explains what is left: every one is weighed first (a viscosity
-        # with a strain-dependent K at half p09's values: no single kept, the pair unfitted, 112 BIC below the best).
-        candidates, evidence, pick = weigh(candidates)
     base = candidates[()]
     base_residual = fitted_difference(base.fit.model, samples, split.train)[seen]
     where = locate(samples, base_residual, seen, s.block, test) if pick.structured else []
@@ -264,9 +304,11 @@ def _all_fits(
     first: FirstFits,
     progress: Callable[[str], None],
     every: dict[tuple[str, ...], Candidate] | None = None,
+    fitted: dict[tuple[str, ...], PhysicsFit] | None = None,
 ) -> dict[tuple[str, ...], Candidate]:
     """Every subset the diagnosis weighs (``fit_candidates``): ``first``'s candidates reused, and not listed again;
-    given ``every``, the candidates fitted so far, they are reused and every other subset is fitted too."""
+    given ``every``, the candidates fitted so far, they are reused and every other subset is fitted too; ``fitted``:
+    fits already made, reused as they are."""
     s = settings
     if every is None:
         progress = _headed("diagnosis: fitting the candidate terms together (K refitted with each)", progress)
@@ -282,6 +324,7 @@ def _all_fits(
         s.block,
         first.test,
         progress,
+        fitted,
         bic_margin=s.bic_margin,
         reused=first.candidates if every is None else every,
         exhaustive=every is not None,
@@ -303,12 +346,13 @@ class _Weighing:
     flexible: float | None
     noise_std: float
     held_out: HeldOutTest
+    fitted: dict[tuple[str, ...], PhysicsFit] | None = None  # fits already made, reused as they are
 
     def __call__(self, every: dict[tuple[str, ...], Candidate] | None = None):
         """(candidates, evidence, selection); ``every``: the candidates so far, reused, every other subset fitted."""
         s, test = self.settings, self.first.test
         fits = _all_fits(
-            self.make_model, self.samples, self.split, s, self.iterations, self.first, self.progress, every
+            self.make_model, self.samples, self.split, s, self.iterations, self.first, self.progress, every, self.fitted
         )
         evidence = shape_evidence(fits, test)
         seen = self.split.judged(self.samples)

@@ -4,9 +4,10 @@ A fit's optimum never reads κ² (LM works in units of the noise std σ), but a 
 whether the reference's contact correction is freed (its standard error scales with κ), whether a held one moves
 later (its gain is weighed under the noise model), whether a term's effect is below the noise. Each narrows the
 range being ``recorded``; for any κ² inside it the same fits would be made again, to the last bit, and only what
-they say under the noise model changes (``PhysicsFit.under``). The pipeline reads the noise's correlation twice
-(``ptwin.pipeline.run.diagnose_set``: off the hybrid twin's residual, then capped by the first fits' residuals)
-and so fits again only where the second reading lies outside the first one's range.
+they say under the noise model changes (``PhysicsFit.under``). The pipeline reads the noise's correlation up to
+three times (``ptwin.pipeline.run.diagnose_set``: off the hybrid twin's residual, capped by the first fits' residuals,
+then by those of the subsets weighed) and so fits again only where a later reading lies outside the range of the
+fits made so far.
 """
 
 from __future__ import annotations

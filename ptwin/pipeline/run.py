@@ -22,7 +22,8 @@ from ptwin.data.noise import (
     rests_on_short_records,
 )
 from ptwin.diagnosis.design import ExperimentDesign
-from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, FirstFits, diagnose, first_fits
+from ptwin.diagnosis.diagnose import Diagnosis, DiagnosisSettings, FirstFits, Weighed, diagnose, first_fits, weigh
+from ptwin.diagnosis.name import Candidate
 from ptwin.fitting.hybrid import HybridTwin
 from ptwin.fitting.inflation_range import InflationRange, recorded
 from ptwin.fitting.physics_fit import PhysicsFit
@@ -58,8 +59,9 @@ FLEXIBLE_DEGREE = 6
 # would be 1.44× the noise's, beyond what the structure test's model error tolerates.
 LOW_STD = 1.2
 CAPPED = "its correlation capped by what a model's residual in contact shows (a line removed per curve)"
-READ_UNDER = "the first fits read under it (no decision on the way to them turns between the two readings)"
-FITTED_UNDER = "the first fits made again under it"
+READ_UNDER = "the fits so far read under it (no decision on the way to them turns between the two readings)"
+FITTED_UNDER = "the fits so far made again under it"
+LARGER = "capped by a larger subset's residual"
 BASE_RESIDUAL = (
     f"base model's residual in contact, less a polynomial of degree {FLEXIBLE_DEGREE} in time per curve "
     "(no baseline of 100 samples)"
@@ -174,22 +176,19 @@ def diagnose_set(
     (``_capped_by_residuals``): what the twin misses of a term reads as correlation as a baseline's drift does (a
     pore relaxation with a hold and a creep, white noise: κ² 18.0 off the twin's residual, 1.23 capped). A fit's
     optimum never reads κ², so the first fits are read under the reading that stands, or made again where a decision
-    on the way to them turns between the two (``ptwin.fitting.inflation_range``)."""
+    on the way to them turns between the two (``ptwin.fitting.inflation_range``). The subsets weighed then cap it once
+    more: where each term alone leaves structure, so does its residual, and only the pair that is there reads the
+    noise's (a viscosity beside a strain-dependent K in p07's setting: κ² 44 off the baselines, 46–47 off every single
+    term's residual, 25 off the pair's, where the noise's is 15.6; under 44 nothing was named)."""
     block, base_fit = settings.diagnosis.block, identification.base
     # read off the base model's residual, σ is corrected by it (no twin): the fits follow it
     measured = _on_base_residual(prepared, base_fit, block) if twin is None else None
     if measured is not None:
         prepared, base_fit = measured, None
     candidates, notes = candidate_settings(prepared, settings)
-    iterations = settings.optim.physics_fit.iterations
-
-    def fitted_first(prepared: Prepared, fitted: dict[tuple[str, ...], PhysicsFit]) -> FirstFits:
-        reference = prepared.make_model.reference
-        model, samples, split = prepared.make_model, prepared.samples, prepared.split
-        return first_fits(model, samples, split, candidates, iterations, prepared.noise, reference, fitted, progress)
-
+    fits = _Fits(candidates, settings.optim.physics_fit.iterations, progress)
     with recorded() as span:
-        first = fitted_first(prepared, {} if base_fit is None else {(): base_fit})
+        first = fits.first(prepared, {} if base_fit is None else {(): base_fit})
     if base_fit is not None:  # stage 1's, made before: its own range, or none where it was not recorded
         span = span & (identification.base_range or InflationRange(low=math.inf))
     if twin is not None:  # off the twin's residual σ stays the baselines' and only κ² changes
@@ -197,29 +196,67 @@ def diagnose_set(
         notes += _uncorrected_std(measured) if measured is not None else []
     read = measured or prepared
     # σ corrected by the base model's residual stays together with its κ²: no cap there
-    stands = read if twin is None and measured is not None else _capped_by_residuals(read, first, block) or read
+    cappable = twin is not None or measured is None
+    stands = (_capped_by_residuals(read, first.candidates, block) if cappable else None) or read
     if stands is not prepared:
-        inflation = stands.noise.inflation
-        reread = span.holds(inflation)
-        kept = {s: c.fit.under(inflation) for s, c in first.candidates.items() if c.fit is not None} if reread else {}
         source = "capped by a model's residual" if stands is not read else "off the hybrid twin's residual"
-        progress(f"the noise's block inflation is {inflation:.3g} ({source}): {READ_UNDER if reread else FITTED_UNDER}")
-        prepared, first = stands, fitted_first(stands, kept)
+        kept = _read_under(stands.noise.inflation, first.candidates, span, source, progress)
+        prepared = stands
+        with recorded() as again:
+            first = fits.first(prepared, kept or {})
+        span = span & again if kept is not None else again
+    hybrid = twin() if twin is not None else None
+    with recorded() as weighing:
+        weighed = fits.weighed(prepared, first, hybrid)
+    lower = _capped_by_residuals(prepared, weighed.candidates, block) if cappable else None
+    if lower is not None:  # a larger subset's residual shows less (a pair of terms, where each alone leaves structure)
+        kept = _read_under(lower.noise.inflation, weighed.candidates, span & weighing, LARGER, progress)
+        prepared = lower
+        weighed = fits.weighed(prepared, fits.first(prepared, kept or {}), hybrid, kept)
+    model, samples, split, noise = prepared.make_model, prepared.samples, prepared.split, prepared.noise
+    design = _design(prepared, settings) if settings.diagnosis.design else None
+    apparent = identification.apparent
     return diagnose(
-        prepared.make_model,
-        prepared.samples,
-        prepared.split,
-        twin() if twin is not None else None,
-        identification.apparent,
-        candidates,
-        iterations,
-        prepared.noise,
-        first,
-        progress,
-        notes=notes,
-        design=_design(prepared, settings) if settings.diagnosis.design else None,
-        on_chosen=on_chosen,
+        model, samples, split, hybrid, apparent, candidates, noise, weighed, progress, notes, design, on_chosen
     )
+
+
+@dataclass(frozen=True)
+class _Fits:
+    """How a set's candidate subsets are fitted: the settings ``candidates``, LM steps, where progress goes."""
+
+    candidates: DiagnosisSettings
+    iterations: int
+    progress: Callable[[str], None]
+
+    def first(self, prepared: Prepared, fitted: dict[tuple[str, ...], PhysicsFit]) -> FirstFits:
+        """``first_fits`` on ``prepared`` (``fitted``: fits already made, reused)."""
+        model, samples, split, noise = prepared.make_model, prepared.samples, prepared.split, prepared.noise
+        s, steps, say = self.candidates, self.iterations, self.progress
+        return first_fits(model, samples, split, s, steps, noise, model.reference, fitted, say)
+
+    def weighed(
+        self, prepared: Prepared, first: FirstFits, hybrid: HybridTwin | None, fitted: dict | None = None
+    ) -> Weighed:
+        """``weigh`` on ``prepared`` after ``first`` (``fitted``: fits of larger subsets already made, reused)."""
+        model, samples, split, noise = prepared.make_model, prepared.samples, prepared.split, prepared.noise
+        s, steps, say = self.candidates, self.iterations, self.progress
+        return weigh(model, samples, split, hybrid, s, steps, noise, first, say, fitted)
+
+
+def _read_under(
+    inflation: float,
+    fitted: dict[tuple[str, ...], Candidate],
+    span: InflationRange,
+    source: str,
+    progress: Callable[[str], None],
+) -> dict[tuple[str, ...], PhysicsFit] | None:
+    """The candidates ``fitted`` read under a noise of κ² ``inflation``, where every decision on the way to them
+    goes the same way there (``span``); None where they must be made again (``source``: where the reading came
+    from, for ``progress``)."""
+    reread = span.holds(inflation)
+    progress(f"the noise's block inflation is {inflation:.3g} ({source}): {READ_UNDER if reread else FITTED_UNDER}")
+    return {s: c.fit.under(inflation) for s, c in fitted.items() if c.fit is not None} if reread else None
 
 
 def _on_twin_residual(prepared: Prepared, twin: Callable[[], HybridTwin], block: int) -> Prepared | None:
@@ -261,17 +298,19 @@ def _on_base_residual(prepared: Prepared, base_fit: PhysicsFit, block: int) -> P
     return _rebuilt(prepared, [replace(c, noise=corrected(c.noise, noise)) for c in prepared.fitted], noise)
 
 
-def _capped_by_residuals(prepared: Prepared, first: FirstFits, block: int) -> Prepared | None:
+def _capped_by_residuals(
+    prepared: Prepared, candidates: dict[tuple[str, ...], Candidate], block: int
+) -> Prepared | None:
     """``prepared`` with the correlation its baselines (or the twin's residual) gave capped by what a model's residual
     in contact shows, or None where no residual shows less. A residual holds the noise, the elastic law's inherited
-    noise and whatever the model misses, so its block inflation reads the noise's or more: the least over the base model
-    and each usable single term's (``first``, ``first_fits``; a line removed per curve) bounds the noise's from above,
+    noise and whatever the model misses, so its block inflation reads the noise's or more: the least over the usable
+    ``candidates`` (a line removed per curve) bounds the noise's from above,
     on records ten times the baselines' (p07-like sets, four baselines of 160 samples of AR(1) noise of 20-sample
     memory, 40% white: κ² 5.2–40 from the baselines, 16.7–24 from the residuals, 15.6 the noise's). A curve's own κ² is
     capped by its own residual's the same way. κ² is then the lesser of the two readings; the ν blocks the tests rest on
     stay the baselines'."""
     std, best, residuals = prepared.noise.std, None, []
-    for candidate in first.candidates.values():
+    for candidate in candidates.values():
         if not candidate.usable:
             continue
         records, step = _contact_records(prepared.samples, candidate.fit.model)
@@ -296,7 +335,7 @@ def _capped_by_residuals(prepared: Prepared, first: FirstFits, block: int) -> Pr
         lag1=best.lag1,
         inflation=best.inflation,
         correlation_time=best.correlation_time,
-        source=f"{prepared.noise.source}, {CAPPED}",
+        source=prepared.noise.source if CAPPED in prepared.noise.source else f"{prepared.noise.source}, {CAPPED}",
     )
     fitted = [
         replace(c, noise=replace(c.noise, inflation=min(c.noise.inflation, own.get(c.curve, np.inf))))
