@@ -154,11 +154,10 @@ REALISM = [
     Case("strain perm., soft", {"strain_dependent_permeability": {"m": 2.0}}, SOFT),
     Case("outside: drift, correlated", {"force_drift": {"rate": 0.3e-9}}, CORRELATED),
     # Known contacts, a short baseline and the noise std in meta.yaml, as p09 has them. A contact moved where the
-    # recording says none can be took the drag and the viscosity. p09's pair at half its values is still missed
-    # (README "make discover-bench"): the base model's residual passes for noise (2.8× its std in RMS) and the
-    # pair, 64 BIC below the best single with both values right, is beyond it in no shape the test can prove. At
-    # 5/8 of its values it was read as a drag with the strain-dependent K, strong, until the samples before a
-    # known contact were fitted (a drag offsets them).
+    # recording says none can be took the drag and the viscosity. p09's pair at half its values passed for noise
+    # (2.8× its std in RMS) until the pair's residual capped the baselines' long reading of the noise's correlation
+    # (stop 114, README "make discover-bench"). At 5/8 of its values it was read as a drag with the strain-dependent
+    # K, strong, until the samples before a known contact were fitted (a drag offsets them).
     Case(
         "pair drag + viscosity, AR(1)",
         {"cantilever_drag": {"b": 1.0e-4}, "solid_viscosity": {"gamma": 12.0}},
